@@ -1,0 +1,132 @@
+"""The ``surrogate`` command: thin, each command parses, calls the API, prints.
+
+Errors are one line on stderr with exit code 2; nothing is half-written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+from ._errors import InputDataError, SolverError
+from ._io import atomic_write_text
+from ._rig import Rig
+from ._simulate import BendingCurve, simulate
+
+__all__ = ["main"]
+
+EXIT_USAGE = 2
+EXIT_SOLVER = 3
+
+
+class _OneLineParser(argparse.ArgumentParser):
+    """Argument errors as one line (argparse prints the whole usage)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def _rig_options(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("rig (defaults: design.md §3)")
+    default = Rig()
+    for flag, field, unit in (
+        ("--thickness", "thickness_mm", "mm"),
+        ("--width", "width_mm", "mm"),
+        ("--bending-length", "bending_length_mm", "mm"),
+        ("--probe-radius", "probe_radius_mm", "mm"),
+        ("--free-length", "free_length_mm", "mm"),
+        ("--friction", "friction", ""),
+        ("--max-angle", "max_angle_deg", "deg"),
+        ("--element-size", "element_size_mm", "mm"),
+        ("--tension", "tension_n", "N"),
+    ):
+        value = getattr(default, field)
+        shown = "graded mesh" if value is None else f"{value:g} {unit}".strip()
+        group.add_argument(flag, dest=field, type=float, default=value,
+                           help=f"{field} (default: {shown})")
+
+
+def _rig_from(args: argparse.Namespace) -> Rig:
+    fields = Rig.__dataclass_fields__
+    return Rig(**{name: getattr(args, name) for name in fields})
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = _OneLineParser(
+        prog="surrogate",
+        description="Identify the coating of seat-belt webbing from 2-point bending tests.",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=_OneLineParser)
+    sim = commands.add_parser("simulate", help="run the full solver for one coating")
+    sim.add_argument("--ecoat", type=float, required=True, help="coat Young's modulus [GPa]")
+    sim.add_argument("--scoat", type=float, required=True, help="coat yield stress [GPa]")
+    sim.add_argument("--tcoat", type=float, required=True, help="coat thickness [mm]")
+    _rig_options(sim)
+    sim.add_argument("--out", type=Path, help="write angle_deg,force_n,force_perp_n to this CSV")
+    sim.add_argument("--json", action="store_true", help="print one JSON object")
+    sim.set_defaults(handler=_simulate)
+    return parser
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    curve = simulate(args.ecoat, args.scoat, args.tcoat, rig=_rig_from(args))
+    if args.out is not None:
+        atomic_write_text(args.out, _curve_csv(curve))
+    if args.json:
+        _print_json(curve.to_json())
+    else:
+        print(_curve_table(curve))
+        if args.out is not None:
+            print(f"curve written to {args.out}")
+    return 0
+
+
+def _curve_csv(curve: BendingCurve) -> str:
+    rows = ["angle_deg,force_n,force_perp_n"]
+    rows += [
+        f"{a:g},{f:.6g},{p:.6g}"
+        for a, f, p in zip(curve.angle_deg, curve.force_n, curve.force_perp_n, strict=True)
+    ]
+    return "\n".join(rows) + "\n"
+
+
+def _curve_table(curve: BendingCurve) -> str:
+    lines = [
+        f"Ecoat {curve.ecoat_gpa:g} GPa, Scoat {curve.scoat_gpa:g} GPa, "
+        f"Tcoat {curve.tcoat_mm:g} mm",
+        f"{'angle_deg':>9} {'force_n':>9} {'force_perp_n':>12}",
+    ]
+    for a, f, p in zip(curve.angle_deg, curve.force_n, curve.force_perp_n, strict=True):
+        if a % 10 == 0 or a == curve.angle_deg[-1]:
+            lines.append(f"{a:9.0f} {f:9.3f} {p:12.3f}")
+    state = "saturated" if curve.saturated else "not saturated within the range"
+    lines.append(f"F60 = {curve.f60_n:.4g} N, theta_sat = {curve.theta_sat_deg:g} deg ({state})")
+    return "\n".join(lines)
+
+
+def _print_json(payload: Any) -> None:
+    print(json.dumps(payload, allow_nan=True))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``surrogate`` command; returns the exit code."""
+    parser = _build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.handler(args))
+    except InputDataError as error:
+        _fail(f"error: {error}", EXIT_USAGE)
+    except SolverError as error:
+        _fail(f"solver error: {error}", EXIT_SOLVER)
+    except OSError as error:
+        _fail(f"error: {error.strerror or error}: {error.filename}", EXIT_USAGE)
+    return 0
+
+
+def _fail(message: str, code: int) -> NoReturn:
+    print(f"surrogate: {message}", file=sys.stderr)
+    raise SystemExit(code)

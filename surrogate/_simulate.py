@@ -1,0 +1,137 @@
+"""``simulate``: one full-solver run of the bending test with the built-in solver."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ._errors import InputDataError
+from ._rig import Rig
+from ._units import gpa_to_mpa
+from ._validate import check_positive
+from .physics import CoatingSection, curve_features, default_mesh, solve_rod, uniform_mesh
+
+__all__ = ["BendingCurve", "simulate", "coating_section"]
+
+
+@dataclass(frozen=True)
+class BendingCurve:
+    """A force–rotation curve and its features.
+
+    Attributes
+    ----------
+    angle_deg, force_n, force_perp_n : ndarray, shape (n,)
+        Rotation on whole degrees, resultant probe force and its component
+        perpendicular to the undeformed strip [N].
+    f60_n, theta_sat_deg, saturated
+        Features (see :func:`surrogate.physics.curve_features`).
+    contact_arc_mm, clamp_moment_nmm : ndarray, shape (n,)
+        Arc length from the clamp to the contact point; moment at the clamp.
+    ecoat_gpa, scoat_gpa, tcoat_mm, rig
+        The inputs.
+    """
+
+    angle_deg: np.ndarray
+    force_n: np.ndarray
+    force_perp_n: np.ndarray
+    f60_n: float
+    theta_sat_deg: float
+    saturated: bool
+    contact_arc_mm: np.ndarray
+    clamp_moment_nmm: np.ndarray
+    ecoat_gpa: float
+    scoat_gpa: float
+    tcoat_mm: float
+    rig: Rig
+
+    def to_json(self) -> dict[str, Any]:
+        """The keys of ``surrogate simulate --json``."""
+        return {
+            "f60_n": self.f60_n,
+            "theta_sat_deg": self.theta_sat_deg,
+            "saturated": self.saturated,
+            "angle_deg": self.angle_deg.tolist(),
+            "force_n": self.force_n.tolist(),
+            "force_perp_n": self.force_perp_n.tolist(),
+        }
+
+
+def coating_section(
+    ecoat_gpa: float, scoat_gpa: float, tcoat_mm: float, rig: Rig
+) -> CoatingSection:
+    """Validate the coating values in the paper's units and build the section law."""
+    ecoat = check_positive("ecoat_gpa", ecoat_gpa, unit="GPa")
+    scoat = check_positive("scoat_gpa", scoat_gpa, unit="GPa")
+    tcoat = check_positive("tcoat_mm", tcoat_mm, unit="mm")
+    half = 0.5 * rig.thickness_mm
+    if tcoat >= half:
+        raise InputDataError(
+            f"tcoat_mm must be < thickness_mm/2 = {half:g} mm (two coat layers fit in the "
+            f"webbing), got {tcoat:g}"
+        )
+    return CoatingSection(gpa_to_mpa(ecoat), gpa_to_mpa(scoat), tcoat, rig.thickness_mm)
+
+
+def simulate(
+    ecoat_gpa: float,
+    scoat_gpa: float,
+    tcoat_mm: float,
+    *,
+    rig: Rig | None = None,
+) -> BendingCurve:
+    """Run the built-in full solver of the 2-point bending test.
+
+    Parameters
+    ----------
+    ecoat_gpa, scoat_gpa : float
+        Coat Young's modulus and yield stress [GPa], > 0.
+    tcoat_mm : float
+        Coat layer thickness [mm], 0 < Tcoat < t/2.
+    rig : Rig, optional
+        The test rig; the default rig of design.md §3 when omitted.
+
+    Returns
+    -------
+    BendingCurve
+
+    Raises
+    ------
+    InputDataError
+        A value is out of range (the message names it and the allowed range).
+    SolverError
+        The solver did not converge (the message names the angle).
+    """
+    rig = Rig() if rig is None else rig
+    section = coating_section(ecoat_gpa, scoat_gpa, tcoat_mm, rig)
+    angles = np.arange(0.0, np.floor(rig.max_angle_deg) + 1.0)
+    if rig.element_size_mm is None:
+        mesh = default_mesh(rig.free_length_mm, rig.bending_length_mm)
+    else:
+        mesh = uniform_mesh(rig.free_length_mm, rig.element_size_mm)
+    solution = solve_rod(
+        section,
+        angles,
+        segment_lengths_mm=mesh,
+        width_mm=rig.width_mm,
+        bending_length_mm=rig.bending_length_mm,
+        contact_radius_mm=rig.contact_radius_mm,
+        friction=rig.friction,
+        tension_n=rig.tension_n,
+    )
+    features = curve_features(solution.angle_deg, solution.force_n)
+    return BendingCurve(
+        angle_deg=solution.angle_deg,
+        force_n=solution.force_n,
+        force_perp_n=solution.force_perp_n,
+        f60_n=features.f60_n,
+        theta_sat_deg=features.theta_sat_deg,
+        saturated=features.saturated,
+        contact_arc_mm=solution.contact_arc_mm,
+        clamp_moment_nmm=solution.clamp_moment_nmm,
+        ecoat_gpa=float(ecoat_gpa),
+        scoat_gpa=float(scoat_gpa),
+        tcoat_mm=float(tcoat_mm),
+        rig=rig,
+    )

@@ -1,0 +1,55 @@
+"""Validation of user-supplied numbers: one place for the wording of errors."""
+
+from __future__ import annotations
+
+import math
+
+from ._errors import InputDataError
+
+__all__ = ["check_finite", "check_positive", "check_range"]
+
+
+def check_finite(name: str, value: object) -> float:
+    """``value`` as a float, or an :class:`InputDataError` naming ``name``."""
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise InputDataError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise InputDataError(f"{name} must be a finite number, got {value!r}")
+    return number
+
+
+def check_positive(name: str, value: object, *, unit: str = "") -> float:
+    """A finite number > 0."""
+    number = check_finite(name, value)
+    if number <= 0.0:
+        raise InputDataError(f"{name} must be > 0{_unit(unit)}, got {number:g}")
+    return number
+
+
+def check_range(
+    name: str,
+    value: object,
+    low: float,
+    high: float,
+    *,
+    unit: str = "",
+    low_open: bool = False,
+    high_open: bool = False,
+) -> float:
+    """A finite number within ``[low, high]`` (ends open as asked)."""
+    number = check_finite(name, value)
+    too_low = number <= low if low_open else number < low
+    too_high = number >= high if high_open else number > high
+    if too_low or too_high:
+        left = "(" if low_open else "["
+        right = ")" if high_open else "]"
+        raise InputDataError(
+            f"{name} must be in {left}{low:g}, {high:g}{right}{_unit(unit)}, got {number:g}"
+        )
+    return number
+
+
+def _unit(unit: str) -> str:
+    return f" {unit}" if unit else ""

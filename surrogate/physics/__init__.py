@@ -1,0 +1,18 @@
+"""The built-in full solver: pure numerics, arrays in, frozen records out."""
+
+from ._features import F60_ANGLE_DEG, CurveFeatures, curve_features
+from ._coating import CoatingSection, bending_stiffness, plastic_moment
+from ._rod import RodSolution, default_mesh, solve_rod, uniform_mesh
+
+__all__ = [
+    "F60_ANGLE_DEG",
+    "CurveFeatures",
+    "curve_features",
+    "CoatingSection",
+    "RodSolution",
+    "bending_stiffness",
+    "default_mesh",
+    "plastic_moment",
+    "solve_rod",
+    "uniform_mesh",
+]

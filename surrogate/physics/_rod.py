@@ -1,0 +1,435 @@
+"""Quasi-static 2-point bending of an inextensible strip: a discrete elastic rod.
+
+Notations
+---------
+Coordinates (x, z) [mm]: the clamp pivot (rotation axis, on the mid-plane at the
+clamp edge) is the origin, the undeformed strip lies along +x, the probe is
+above it.
+
+N          number of straight segments of the mid-line.
+h          (N,) segment lengths [mm]; the mid-line is inextensible.
+psi        (N,) segment angles [rad]; the unknowns.
+r          (N+1, 2) node positions, ``r[0] = 0``, ``r[i+1] = r[i] + h[i]·e(psi[i])``.
+theta      clamp rotation [rad]; the clamp imposes the tangent ``theta`` at s = 0.
+kappa      (N,) curvature at nodes 0..N-1 (node 0 is the clamp edge, where the
+           clamp's tangent meets segment 0); Voronoi lengths ``ell``.
+c          probe centre ``(l, rho)`` with ``rho`` the contact radius: the
+           mid-line keeps the distance ``rho = probe_radius + t/2`` from ``c``.
+lam        normal contact force [N] (Lagrange multiplier of ``gap = 0``).
+J          (2, N) derivative of the contact point with respect to ``psi``.
+
+Each load step solves the KKT system of the incremental problem by Newton's
+method: bending moments from the section law, the dead tension at the free
+end, frictional contact with the probe (regularised Coulomb law on the slip of
+the material point in contact), and the gap equation.  The Jacobian is exact
+(checked against finite differences in the tests).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._errors import SolverError
+from ._coating import CoatingSection, SectionState
+
+__all__ = ["RodSolution", "default_mesh", "uniform_mesh", "solve_rod"]
+
+_STICK_STIFFNESS_FACTOR = 1e5  # tangential penalty of sticking, in units of EI/l³
+_MAX_NEWTON = 30
+_MAX_BISECTIONS = 8
+
+
+@dataclass(frozen=True)
+class RodSolution:
+    """History of a bending run, one entry per requested angle.
+
+    Forces are those the probe receives, for the full specimen width [N].
+    """
+
+    angle_deg: np.ndarray
+    force_n: np.ndarray
+    force_perp_n: np.ndarray
+    normal_force_n: np.ndarray
+    contact_arc_mm: np.ndarray
+    clamp_moment_nmm: np.ndarray
+    max_plastic_curvature_per_mm: np.ndarray
+    segment_lengths_mm: np.ndarray
+
+
+def uniform_mesh(length_mm: float, element_size_mm: float) -> np.ndarray:
+    """Segment lengths of a uniform mesh with elements no longer than the size."""
+    n = max(1, int(np.ceil(length_mm / element_size_mm - 1e-9)))
+    return np.full(n, length_mm / n)
+
+
+def default_mesh(
+    length_mm: float, bending_length_mm: float, *, fine_fraction: float = 1.0 / 25.0
+) -> np.ndarray:
+    """Fine segments over the loaded zone, geometrically coarser in the tail.
+
+    The loaded zone (clamp to the farthest contact point, about 1.5·l at 90°)
+    gets segments of ``fine_fraction·l``; beyond ``1.8·l`` the tail, which only
+    carries the end load, grows by 25 % per segment up to 10× the fine size.
+    """
+    fine = fine_fraction * bending_length_mm
+    fine_end = min(length_mm, 1.8 * bending_length_mm)
+    lengths = list(uniform_mesh(fine_end, fine))
+    s, size = fine_end, fine
+    while s < length_mm - 1e-9:
+        size = min(size * 1.25, 10.0 * fine)
+        step = min(size, length_mm - s)
+        if length_mm - s - step < 0.3 * size:  # avoid a sliver at the end
+            step = length_mm - s
+        lengths.append(step)
+        s += step
+    return np.asarray(lengths)
+
+
+@dataclass
+class _Contact:
+    """Closest point of the mid-line to the probe centre and its derivatives."""
+
+    segment: int  # contact segment k (segment case) or first segment after the vertex
+    on_vertex: bool
+    upstream: int  # segments wholly between the clamp and the contact point
+    u: float  # position of the contact point along segment k [mm]
+    point: np.ndarray  # (2,)
+    distance: float  # signed distance from the mid-line to the probe centre
+    normal: np.ndarray  # (2,) unit vector from the contact point to the probe centre
+    tangent: np.ndarray  # (2,) normal rotated by -90°: along the strip, away from the clamp
+    jac: np.ndarray  # (2, N) d(point)/d(psi) at fixed u
+    dbeta: np.ndarray  # (N,) derivative of the normal's angle
+
+
+def _directions(psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit tangents ``e`` and normals ``n`` (``e`` turned by +90°), shape (N, 2)."""
+    cos, sin = np.cos(psi), np.sin(psi)
+    e = np.empty((psi.size, 2))
+    n = np.empty((psi.size, 2))
+    e[:, 0], e[:, 1] = cos, sin
+    n[:, 0], n[:, 1] = -sin, cos
+    return e, n
+
+
+def _nodes(h: np.ndarray, e: np.ndarray) -> np.ndarray:
+    nodes = np.zeros((h.size + 1, 2))
+    np.cumsum(h[:, None] * e, axis=0, out=nodes[1:])
+    return nodes
+
+
+def _find_contact(
+    h: np.ndarray, e: np.ndarray, n: np.ndarray, nodes: np.ndarray, centre: np.ndarray
+) -> _Contact:
+    rel = centre[None, :] - nodes[:-1]
+    u_raw = np.einsum("ij,ij->i", e, rel)
+    u = np.clip(u_raw, 0.0, h)
+    closest = nodes[:-1] + u[:, None] * e
+    k = int(np.argmin(np.sum((centre[None, :] - closest) ** 2, axis=1)))
+    N = h.size
+    jac = np.zeros((2, N))
+    if 0.0 < u_raw[k] < h[k]:
+        # Segment case: the signed distance stays meaningful for a Newton
+        # iterate that over-shoots the probe centre.
+        jac[:, :k] = (h[:k, None] * n[:k]).T
+        jac[:, k] = u_raw[k] * n[k]
+        dbeta = np.zeros(N)
+        dbeta[k] = 1.0
+        return _Contact(k, False, k, float(u_raw[k]), closest[k],
+                        float(n[k] @ rel[k]), n[k], e[k], jac, dbeta)
+    v = k + 1 if u_raw[k] >= h[k] else k  # the vertex is node v
+    point = nodes[v]
+    diff = centre - point
+    distance = float(np.hypot(diff[0], diff[1]))
+    normal = diff / distance
+    tangent = np.array([normal[1], -normal[0]])
+    jac[:, :v] = (h[:v, None] * n[:v]).T
+    dbeta = (tangent @ jac) / distance
+    return _Contact(min(v, N - 1), True, v, 0.0, point, distance, normal, tangent, jac, dbeta)
+
+
+@dataclass
+class _Evaluation:
+    """Residual of the KKT system at one iterate, with what its Jacobian needs."""
+
+    psi: np.ndarray
+    lam: float
+    residual: np.ndarray  # (N+1,): moments [N·mm] then the gap [mm]
+    state: SectionState  # after the return mapping
+    moment: np.ndarray  # (N,) total moment at nodes 0..N-1 [N·mm]
+    stiff: np.ndarray  # (N,) tangent dM/dkappa / ell [N·mm]
+    e: np.ndarray
+    contact: _Contact
+    friction_n: float  # friction force on the strip along the contact tangent [N]
+    sticking: bool
+    slip_vec: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Configuration:
+    """A converged configuration, the reference for the next step's slip."""
+
+    psi: np.ndarray
+    lam: float
+    state: SectionState
+    friction_n: float
+    nodes: np.ndarray
+    e: np.ndarray
+
+
+class _Problem:
+    """Everything fixed during a run: geometry, loads, the section law."""
+
+    def __init__(
+        self,
+        section: CoatingSection,
+        h: np.ndarray,
+        *,
+        width_mm: float,
+        bending_length_mm: float,
+        contact_radius_mm: float,
+        friction: float,
+        tension_n: float,
+    ) -> None:
+        self.section = section
+        self.h = h
+        self.N = h.size
+        self.width = width_mm
+        self.centre = np.array([bending_length_mm, contact_radius_mm])
+        self.rho = contact_radius_mm
+        self.mu = friction
+        self.tension = tension_n
+        ell = np.empty(self.N)
+        ell[0] = h[0] / 2.0
+        ell[1:] = 0.5 * (h[:-1] + h[1:])
+        self.ell = ell
+        self.stiffness_scale = section.stiffness_nmm * width_mm / bending_length_mm
+        self.stick_stiffness = _STICK_STIFFNESS_FACTOR * self.stiffness_scale / bending_length_mm**2
+        self._diag = np.arange(self.N)
+
+    def configuration(
+        self, psi: np.ndarray, lam: float, state: SectionState, friction_n: float
+    ) -> _Configuration:
+        e, _ = _directions(psi)
+        return _Configuration(psi, lam, state, friction_n, _nodes(self.h, e), e)
+
+    def evaluate(
+        self, psi: np.ndarray, lam: float, theta: float, previous: _Configuration
+    ) -> _Evaluation:
+        """Residual of equilibrium and of the gap at ``(psi, lam)``."""
+        N, h = self.N, self.h
+        kappa = np.empty(N)
+        kappa[0] = psi[0] - theta
+        kappa[1:] = psi[1:] - psi[:-1]
+        kappa /= self.ell
+        m_unit, c_unit, state = self.section.respond(kappa, previous.state)
+        moment = m_unit * self.width
+        residual = np.empty(N + 1)
+        residual[:N] = moment
+        residual[: N - 1] -= moment[1:]
+        e, n = _directions(psi)
+        if self.tension:
+            residual[:N] += self.tension * h * e[:, 1]
+        contact = _find_contact(h, e, n, _nodes(h, e), self.centre)
+        residual[:N] += lam * (contact.normal @ contact.jac)
+        residual[N] = contact.distance - self.rho
+        friction, sticking, slip_vec = 0.0, False, np.zeros(2)
+        if self.mu:
+            if contact.on_vertex:
+                before = previous.nodes[contact.upstream]
+            else:
+                k = contact.segment
+                before = previous.nodes[k] + contact.u * previous.e[k]
+            slip_vec = contact.point - before
+            # Coulomb's law by return mapping: stick elastically, else slide.
+            slip = float(contact.tangent @ slip_vec)
+            trial = previous.friction_n - self.stick_stiffness * slip
+            limit = self.mu * max(lam, 0.0)
+            sticking = abs(trial) <= limit
+            friction = trial if sticking else float(np.copysign(limit, trial))
+            residual[:N] -= friction * (contact.tangent @ contact.jac)
+        stiff = c_unit * self.width / self.ell
+        return _Evaluation(psi, lam, residual, state, moment, stiff, e, contact,
+                           friction, sticking, slip_vec)
+
+    def jacobian(self, ev: _Evaluation) -> np.ndarray:
+        """Exact derivative of ``ev.residual`` with respect to ``(psi, lam)``."""
+        N, h, idx = self.N, self.h, self._diag
+        contact, lam = ev.contact, ev.lam
+        jacobian = np.zeros((N + 1, N + 1))
+        diag = ev.stiff.copy()
+        diag[:-1] += ev.stiff[1:]
+        if self.tension:
+            diag += self.tension * h * ev.e[:, 0]
+        jacobian[idx, idx] = diag
+        jacobian[idx[:-1], idx[1:]] = -ev.stiff[1:]
+        jacobian[idx[1:], idx[:-1]] = -ev.stiff[1:]
+
+        k, up = contact.segment, contact.upstream
+        d_hat, tau, dbeta = contact.normal, contact.tangent, contact.dbeta
+        normal_j = d_hat @ contact.jac  # = -d(gap)/d(psi)
+        tangent_j = tau @ contact.jac
+        e_up = ev.e[:up]
+        # Hessian of the gap, times -lam.
+        hess = np.outer(tangent_j, dbeta)
+        hess[idx[:up], idx[:up]] += h[:up] * (e_up @ d_hat)
+        if not contact.on_vertex:
+            hess[k, :] += tangent_j
+            hess[k, k] -= contact.distance
+        block = jacobian[:N, :N]
+        block -= lam * hess
+        jacobian[:N, N] = normal_j
+        jacobian[N, :N] = -normal_j
+        if self.mu:
+            # d(tau·J)/d(psi), times the friction force
+            turn = np.outer(normal_j, dbeta)
+            turn[idx[:up], idx[:up]] -= h[:up] * (e_up @ tau)
+            if not contact.on_vertex:
+                turn[k, k] -= contact.u
+            block -= ev.friction_n * turn
+            if ev.sticking:
+                dslip = tangent_j + dbeta * float(d_hat @ ev.slip_vec)
+                block += self.stick_stiffness * np.outer(tangent_j, dslip)
+            elif lam > 0.0:
+                jacobian[:N, N] -= self.mu * np.sign(ev.friction_n) * tangent_j
+        return jacobian
+
+    def forces(self, ev: _Evaluation) -> tuple[float, float]:
+        """Resultant and perpendicular force on the probe [N]."""
+        contact = ev.contact
+        on_probe = ev.lam * contact.normal - ev.friction_n * contact.tangent
+        return float(np.hypot(on_probe[0], on_probe[1])), float(on_probe[1])
+
+
+def _newton(
+    problem: _Problem,
+    psi: np.ndarray,
+    lam: float,
+    theta: float,
+    previous: _Configuration,
+) -> _Evaluation | None:
+    """Solve one load step; ``None`` when Newton does not converge."""
+    moment_tol = 1e-9 * problem.stiffness_scale
+    gap_tol = 1e-10 * problem.centre[0]
+    for _ in range(_MAX_NEWTON):
+        ev = problem.evaluate(psi, lam, theta, previous)
+        residual = ev.residual
+        if not np.all(np.isfinite(residual)):
+            return None
+        if np.max(np.abs(residual[:-1])) < moment_tol and abs(residual[-1]) < gap_tol:
+            return ev
+        try:
+            delta = np.linalg.solve(problem.jacobian(ev), -residual)
+        except np.linalg.LinAlgError:
+            return None
+        # Limit the rotation update: the contact search is only valid nearby.
+        scale = min(1.0, 0.2 / max(float(np.max(np.abs(delta[:-1]))), 1e-300))
+        psi = psi + scale * delta[:-1]
+        lam = lam + scale * delta[-1]
+    return None
+
+
+def _record(problem: _Problem, ev: _Evaluation) -> tuple[float, ...]:
+    force, perp = problem.forces(ev)
+    contact = ev.contact
+    arc = float(np.sum(problem.h[: contact.upstream]) + contact.u)
+    kappa_p = problem.section.plastic_curvature(ev.state)
+    return (force, perp, ev.lam, arc, float(ev.moment[0]), float(np.max(np.abs(kappa_p))))
+
+
+def solve_rod(
+    section: CoatingSection,
+    angles_deg: np.ndarray,
+    *,
+    segment_lengths_mm: np.ndarray,
+    width_mm: float,
+    bending_length_mm: float,
+    contact_radius_mm: float,
+    friction: float,
+    tension_n: float = 0.0,
+) -> RodSolution:
+    """Rotate the clamp through ``angles_deg`` (increasing, from 0) and record.
+
+    Parameters
+    ----------
+    section : CoatingSection
+        Moment–curvature law of the strip.
+    angles_deg : array_like, shape (n_angles,)
+        Clamp rotations at which to record, increasing, ≥ 0 [deg].
+    segment_lengths_mm : array_like, shape (N,)
+        The mesh (see :func:`default_mesh`, :func:`uniform_mesh`).
+    width_mm, bending_length_mm : float
+        Specimen width ``b`` and horizontal clamp–probe distance ``l``.
+    contact_radius_mm : float
+        Distance kept between the mid-line and the probe centre
+        (probe radius + t/2); > 0.
+    friction : float
+        Coulomb coefficient at the probe.
+    tension_n : float
+        Dead load at the free end along +x [N].
+
+    Raises
+    ------
+    SolverError
+        When a step does not converge even after bisection, the strip slides
+        off the probe, or it loses contact; the message names the angle.
+    """
+    h = np.asarray(segment_lengths_mm, dtype=float)
+    problem = _Problem(
+        section, h, width_mm=width_mm, bending_length_mm=bending_length_mm,
+        contact_radius_mm=contact_radius_mm, friction=friction, tension_n=tension_n,
+    )
+    current = problem.configuration(np.zeros(h.size), 0.0, section.initial_state(h.size), 0.0)
+    rates = (np.zeros(h.size), 0.0)  # d(psi)/d(theta), d(lam)/d(theta) of the last step
+    theta_done = 0.0
+    at_rest = (0.0, 0.0, 0.0, bending_length_mm, 0.0, 0.0)
+    history: list[tuple[float, ...]] = []
+    for angle in np.asarray(angles_deg, dtype=float):
+        target = float(np.radians(angle))
+        span, substeps = target - theta_done, 1
+        while theta_done < target - 1e-12:
+            theta = min(target, theta_done + span / substeps)
+            dtheta = theta - theta_done
+            guess_psi = current.psi + rates[0] * dtheta
+            guess_lam = max(current.lam + rates[1] * dtheta, 0.0)
+            ev = _newton(problem, guess_psi, guess_lam, theta, current)
+            if ev is None:
+                substeps *= 2
+                if substeps > 2**_MAX_BISECTIONS:
+                    raise SolverError(
+                        f"the bending solver did not converge at {np.degrees(theta):.2f}° "
+                        f"(last converged {np.degrees(theta_done):.2f}°); "
+                        "try another element_size_mm or check the coating values"
+                    )
+                continue
+            _check_contact(ev, h.size, theta)
+            rates = ((ev.psi - current.psi) / dtheta, (ev.lam - current.lam) / dtheta)
+            current = problem.configuration(ev.psi, ev.lam, ev.state, ev.friction_n)
+            theta_done = theta
+            at_rest = _record(problem, ev)
+        history.append(at_rest)
+    columns = np.array(history).T
+    return RodSolution(
+        angle_deg=np.asarray(angles_deg, dtype=float),
+        force_n=columns[0],
+        force_perp_n=columns[1],
+        normal_force_n=columns[2],
+        contact_arc_mm=columns[3],
+        clamp_moment_nmm=columns[4],
+        max_plastic_curvature_per_mm=columns[5],
+        segment_lengths_mm=h,
+    )
+
+
+def _check_contact(ev: _Evaluation, n_segments: int, theta: float) -> None:
+    if ev.contact.upstream >= n_segments:
+        raise SolverError(
+            f"the strip slid off the probe at {np.degrees(theta):.2f}°; "
+            "increase free_length_mm"
+        )
+    if ev.lam < 0.0:
+        raise SolverError(
+            f"the strip lost contact with the probe at {np.degrees(theta):.2f}° "
+            f"(contact force {ev.lam:.3g} N < 0); check the end load"
+        )
