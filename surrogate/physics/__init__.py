@@ -2,7 +2,7 @@
 
 from ._features import F60_ANGLE_DEG, CurveFeatures, curve_features
 from ._coating import CoatingSection, bending_stiffness, plastic_moment
-from ._rod import RodSolution, default_mesh, solve_rod, uniform_mesh
+from ._rod import RodSolution, default_mesh, solve_cantilever, solve_rod, uniform_mesh
 
 __all__ = [
     "F60_ANGLE_DEG",
@@ -13,6 +13,7 @@ __all__ = [
     "bending_stiffness",
     "default_mesh",
     "plastic_moment",
+    "solve_cantilever",
     "solve_rod",
     "uniform_mesh",
 ]

@@ -27,6 +27,7 @@ the material point in contact), and the gap equation.  The Jacobian is exact
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,8 +35,9 @@ import numpy as np
 from .._errors import SolverError
 from ._coating import CoatingSection, SectionState
 
-__all__ = ["RodSolution", "default_mesh", "uniform_mesh", "solve_rod"]
+__all__ = ["RodSolution", "default_mesh", "solve_cantilever", "solve_rod", "uniform_mesh"]
 
+_HYSTERESIS = 0.05  # of a segment length, see _find_contact
 _STICK_STIFFNESS_FACTOR = 1e5  # tangential penalty of sticking, in units of EI/l³
 _MAX_NEWTON = 30
 _MAX_BISECTIONS = 8
@@ -120,13 +122,29 @@ def _nodes(h: np.ndarray, e: np.ndarray) -> np.ndarray:
 
 
 def _find_contact(
-    h: np.ndarray, e: np.ndarray, n: np.ndarray, nodes: np.ndarray, centre: np.ndarray
+    h: np.ndarray,
+    e: np.ndarray,
+    n: np.ndarray,
+    nodes: np.ndarray,
+    centre: np.ndarray,
+    preferred: int | None = None,
 ) -> _Contact:
     rel = centre[None, :] - nodes[:-1]
     u_raw = np.einsum("ij,ij->i", e, rel)
     u = np.clip(u_raw, 0.0, h)
     closest = nodes[:-1] + u[:, None] * e
-    k = int(np.argmin(np.sum((centre[None, :] - closest) ** 2, axis=1)))
+    distance = np.sqrt(np.sum((centre[None, :] - closest) ** 2, axis=1))
+    k = int(np.argmin(distance))
+    if (
+        preferred is not None
+        and 0.0 < u_raw[preferred] < h[preferred]
+        and distance[preferred] - distance[k] < _HYSTERESIS * h[preferred]
+    ):
+        # Where the strip is concave towards the probe, the probe centre
+        # projects onto two neighbouring segments and the nearer one flips
+        # between Newton iterates; keep the segment in use until the
+        # projection leaves it (the other segment's overlap is ~rho·kink²).
+        k = preferred
     N = h.size
     jac = np.zeros((2, N))
     if 0.0 < u_raw[k] < h[k]:
@@ -160,7 +178,7 @@ class _Evaluation:
     moment: np.ndarray  # (N,) total moment at nodes 0..N-1 [N·mm]
     stiff: np.ndarray  # (N,) tangent dM/dkappa / ell [N·mm]
     e: np.ndarray
-    contact: _Contact
+    contact: _Contact | None  # None without a probe
     friction_n: float  # friction force on the strip along the contact tangent [N]
     sticking: bool
     slip_vec: np.ndarray
@@ -188,7 +206,7 @@ class _Problem:
         *,
         width_mm: float,
         bending_length_mm: float,
-        contact_radius_mm: float,
+        contact_radius_mm: float | None,
         friction: float,
         tension_n: float,
     ) -> None:
@@ -196,8 +214,10 @@ class _Problem:
         self.h = h
         self.N = h.size
         self.width = width_mm
-        self.centre = np.array([bending_length_mm, contact_radius_mm])
-        self.rho = contact_radius_mm
+        # No probe (None) is for verification against the cantilever table.
+        self.has_probe = contact_radius_mm is not None
+        self.rho = contact_radius_mm if contact_radius_mm is not None else 0.0
+        self.centre = np.array([bending_length_mm, self.rho])
         self.mu = friction
         self.tension = tension_n
         ell = np.empty(self.N)
@@ -215,7 +235,12 @@ class _Problem:
         return _Configuration(psi, lam, state, friction_n, _nodes(self.h, e), e)
 
     def evaluate(
-        self, psi: np.ndarray, lam: float, theta: float, previous: _Configuration
+        self,
+        psi: np.ndarray,
+        lam: float,
+        theta: float,
+        previous: _Configuration,
+        preferred: int | None = None,
     ) -> _Evaluation:
         """Residual of equilibrium and of the gap at ``(psi, lam)``."""
         N, h = self.N, self.h
@@ -231,7 +256,12 @@ class _Problem:
         e, n = _directions(psi)
         if self.tension:
             residual[:N] += self.tension * h * e[:, 1]
-        contact = _find_contact(h, e, n, _nodes(h, e), self.centre)
+        stiff = c_unit * self.width / self.ell
+        if not self.has_probe:
+            residual[N] = lam
+            return _Evaluation(psi, lam, residual, state, moment, stiff, e, None,
+                               0.0, False, np.zeros(2))
+        contact = _find_contact(h, e, n, _nodes(h, e), self.centre, preferred)
         residual[:N] += lam * (contact.normal @ contact.jac)
         residual[N] = contact.distance - self.rho
         friction, sticking, slip_vec = 0.0, False, np.zeros(2)
@@ -249,7 +279,6 @@ class _Problem:
             sticking = abs(trial) <= limit
             friction = trial if sticking else float(np.copysign(limit, trial))
             residual[:N] -= friction * (contact.tangent @ contact.jac)
-        stiff = c_unit * self.width / self.ell
         return _Evaluation(psi, lam, residual, state, moment, stiff, e, contact,
                            friction, sticking, slip_vec)
 
@@ -265,7 +294,9 @@ class _Problem:
         jacobian[idx, idx] = diag
         jacobian[idx[:-1], idx[1:]] = -ev.stiff[1:]
         jacobian[idx[1:], idx[:-1]] = -ev.stiff[1:]
-
+        if contact is None:
+            jacobian[N, N] = 1.0
+            return jacobian
         k, up = contact.segment, contact.upstream
         d_hat, tau, dbeta = contact.normal, contact.tangent, contact.dbeta
         normal_j = d_hat @ contact.jac  # = -d(gap)/d(psi)
@@ -298,6 +329,8 @@ class _Problem:
     def forces(self, ev: _Evaluation) -> tuple[float, float]:
         """Resultant and perpendicular force on the probe [N]."""
         contact = ev.contact
+        if contact is None:
+            return 0.0, 0.0
         on_probe = ev.lam * contact.normal - ev.friction_n * contact.tangent
         return float(np.hypot(on_probe[0], on_probe[1])), float(on_probe[1])
 
@@ -312,8 +345,11 @@ def _newton(
     """Solve one load step; ``None`` when Newton does not converge."""
     moment_tol = 1e-9 * problem.stiffness_scale
     gap_tol = 1e-10 * problem.centre[0]
+    preferred = None
     for _ in range(_MAX_NEWTON):
-        ev = problem.evaluate(psi, lam, theta, previous)
+        ev = problem.evaluate(psi, lam, theta, previous, preferred)
+        if ev.contact is not None and not ev.contact.on_vertex:
+            preferred = ev.contact.segment
         residual = ev.residual
         if not np.all(np.isfinite(residual)):
             return None
@@ -333,9 +369,12 @@ def _newton(
 def _record(problem: _Problem, ev: _Evaluation) -> tuple[float, ...]:
     force, perp = problem.forces(ev)
     contact = ev.contact
+    assert contact is not None  # a run with a probe always has a contact
     arc = float(np.sum(problem.h[: contact.upstream]) + contact.u)
     kappa_p = problem.section.plastic_curvature(ev.state)
-    return (force, perp, ev.lam, arc, float(ev.moment[0]), float(np.max(np.abs(kappa_p))))
+    # The probe bends the strip clockwise (negative curvature): report the
+    # clamp moment with the sign of the lifting rotation.
+    return (force, perp, ev.lam, arc, -float(ev.moment[0]), float(np.max(np.abs(kappa_p))))
 
 
 def solve_rod(
@@ -380,13 +419,39 @@ def solve_rod(
         section, h, width_mm=width_mm, bending_length_mm=bending_length_mm,
         contact_radius_mm=contact_radius_mm, friction=friction, tension_n=tension_n,
     )
-    current = problem.configuration(np.zeros(h.size), 0.0, section.initial_state(h.size), 0.0)
-    rates = (np.zeros(h.size), 0.0)  # d(psi)/d(theta), d(lam)/d(theta) of the last step
-    theta_done = 0.0
     at_rest = (0.0, 0.0, 0.0, bending_length_mm, 0.0, 0.0)
-    history: list[tuple[float, ...]] = []
-    for angle in np.asarray(angles_deg, dtype=float):
-        target = float(np.radians(angle))
+    history = [
+        at_rest if ev is None else _record(problem, ev)
+        for ev, _ in _march(problem, np.radians(np.asarray(angles_deg, dtype=float)))
+    ]
+    columns = np.array(history).T
+    return RodSolution(
+        angle_deg=np.asarray(angles_deg, dtype=float),
+        force_n=columns[0],
+        force_perp_n=columns[1],
+        normal_force_n=columns[2],
+        contact_arc_mm=columns[3],
+        clamp_moment_nmm=columns[4],
+        max_plastic_curvature_per_mm=columns[5],
+        segment_lengths_mm=h,
+    )
+
+
+def _march(
+    problem: _Problem, angles_rad: np.ndarray
+) -> Iterator[tuple[_Evaluation | None, _Configuration]]:
+    """Rotate the clamp through ``angles_rad``; yield each converged state.
+
+    Each interval is one load step, bisected when Newton fails; the
+    predictor extrapolates the last step's rates. ``None`` stands for the
+    unloaded state at 0°.
+    """
+    n = problem.N
+    current = problem.configuration(np.zeros(n), 0.0, problem.section.initial_state(n), 0.0)
+    rates = (np.zeros(n), 0.0)  # d(psi)/d(theta), d(lam)/d(theta) of the last step
+    theta_done = 0.0
+    last: _Evaluation | None = None
+    for target in angles_rad:
         span, substeps = target - theta_done, 1
         while theta_done < target - 1e-12:
             theta = min(target, theta_done + span / substeps)
@@ -403,23 +468,12 @@ def solve_rod(
                         "try another element_size_mm or check the coating values"
                     )
                 continue
-            _check_contact(ev, h.size, theta)
+            _check_contact(ev, n, theta)
             rates = ((ev.psi - current.psi) / dtheta, (ev.lam - current.lam) / dtheta)
             current = problem.configuration(ev.psi, ev.lam, ev.state, ev.friction_n)
             theta_done = theta
-            at_rest = _record(problem, ev)
-        history.append(at_rest)
-    columns = np.array(history).T
-    return RodSolution(
-        angle_deg=np.asarray(angles_deg, dtype=float),
-        force_n=columns[0],
-        force_perp_n=columns[1],
-        normal_force_n=columns[2],
-        contact_arc_mm=columns[3],
-        clamp_moment_nmm=columns[4],
-        max_plastic_curvature_per_mm=columns[5],
-        segment_lengths_mm=h,
-    )
+            last = ev
+        yield last, current
 
 
 def _check_contact(ev: _Evaluation, n_segments: int, theta: float) -> None:
@@ -433,3 +487,44 @@ def _check_contact(ev: _Evaluation, n_segments: int, theta: float) -> None:
             f"the strip lost contact with the probe at {np.degrees(theta):.2f}° "
             f"(contact force {ev.lam:.3g} N < 0); check the end load"
         )
+
+
+def solve_cantilever(
+    section: CoatingSection,
+    loads_n: np.ndarray,
+    *,
+    segment_lengths_mm: np.ndarray,
+    width_mm: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Clamped strip under a dead tip load perpendicular to its clamped axis.
+
+    A verification problem: the clamp holds the strip along +z (a 90° clamp
+    rotation, no probe) and the end load acts along +x.
+
+    Returns
+    -------
+    tip_mm : ndarray, shape (n_loads, 2)
+        Tip deflection ``w`` (along the load) and axial shortening ``u``.
+    tip_rotation_rad : ndarray, shape (n_loads,)
+    """
+    h = np.asarray(segment_lengths_mm, dtype=float)
+    length = float(np.sum(h))
+    problem = _Problem(section, h, width_mm=width_mm, bending_length_mm=length,
+                       contact_radius_mm=None, friction=0.0, tension_n=0.0)
+    theta = 0.5 * np.pi
+    current = problem.configuration(np.full(h.size, theta), 0.0,
+                                    section.initial_state(h.size), 0.0)
+    tips, rotations = [], []
+    load_done = 0.0
+    for load in np.asarray(loads_n, dtype=float):
+        for sub in np.linspace(load_done, load, 9)[1:]:
+            problem.tension = float(sub)
+            ev = _newton(problem, current.psi, 0.0, theta, current)
+            if ev is None:
+                raise SolverError(f"the cantilever did not converge at a load of {sub:g} N")
+            current = problem.configuration(ev.psi, 0.0, ev.state, 0.0)
+        load_done = load
+        tip = current.nodes[-1]
+        tips.append((tip[0], length - tip[1]))
+        rotations.append(theta - current.psi[-1])
+    return np.array(tips), np.array(rotations)
