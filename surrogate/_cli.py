@@ -46,8 +46,9 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
     ):
         value = getattr(default, field)
         shown = "graded mesh" if value is None else f"{value:g} {unit}".strip()
-        group.add_argument(flag, dest=field, type=float, default=value,
-                           help=f"{field} (default: {shown})")
+        group.add_argument(
+            flag, dest=field, type=float, default=value, help=f"{field} (default: {shown})"
+        )
 
 
 def _rig_from(args: argparse.Namespace) -> Rig:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ._errors import InputDataError
-from ._validate import check_finite, check_positive, check_range
+from ._validate import check_positive, check_range
 
 __all__ = ["Rig"]
 
@@ -58,7 +58,10 @@ class Rig:
                 "bending_length_mm", self.bending_length_mm, unit="mm"
             ),
             "probe_radius_mm": check_range(
-                "probe_radius_mm", self.probe_radius_mm, 0.0, 10.0 * self.bending_length_mm,
+                "probe_radius_mm",
+                self.probe_radius_mm,
+                0.0,
+                10.0 * self.bending_length_mm,
                 unit="mm",
             ),
             "free_length_mm": check_positive("free_length_mm", self.free_length_mm, unit="mm"),
@@ -70,8 +73,12 @@ class Rig:
         }
         if self.element_size_mm is not None:
             checked["element_size_mm"] = check_range(
-                "element_size_mm", self.element_size_mm, 0.0, self.bending_length_mm,
-                unit="mm", low_open=True,
+                "element_size_mm",
+                self.element_size_mm,
+                0.0,
+                self.bending_length_mm,
+                unit="mm",
+                low_open=True,
             )
         for name, value in checked.items():
             object.__setattr__(self, name, value)

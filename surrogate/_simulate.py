@@ -13,7 +13,7 @@ from ._units import gpa_to_mpa
 from ._validate import check_positive
 from .physics import CoatingSection, curve_features, default_mesh, solve_rod, uniform_mesh
 
-__all__ = ["BendingCurve", "simulate", "coating_section"]
+__all__ = ["BendingCurve", "coating_section", "simulate"]
 
 
 @dataclass(frozen=True)

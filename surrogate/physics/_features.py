@@ -17,7 +17,7 @@ import numpy as np
 
 from .._errors import InputDataError
 
-__all__ = ["CurveFeatures", "curve_features", "F60_ANGLE_DEG"]
+__all__ = ["F60_ANGLE_DEG", "CurveFeatures", "curve_features"]
 
 F60_ANGLE_DEG = 60.0
 _SECANT_SPAN_DEG = 5

@@ -154,8 +154,9 @@ def _find_contact(
         jac[:, k] = u_raw[k] * n[k]
         dbeta = np.zeros(N)
         dbeta[k] = 1.0
-        return _Contact(k, False, k, float(u_raw[k]), closest[k],
-                        float(n[k] @ rel[k]), n[k], e[k], jac, dbeta)
+        return _Contact(
+            k, False, k, float(u_raw[k]), closest[k], float(n[k] @ rel[k]), n[k], e[k], jac, dbeta
+        )
     v = k + 1 if u_raw[k] >= h[k] else k  # the vertex is node v
     point = nodes[v]
     diff = centre - point
@@ -259,8 +260,9 @@ class _Problem:
         stiff = c_unit * self.width / self.ell
         if not self.has_probe:
             residual[N] = lam
-            return _Evaluation(psi, lam, residual, state, moment, stiff, e, None,
-                               0.0, False, np.zeros(2))
+            return _Evaluation(
+                psi, lam, residual, state, moment, stiff, e, None, 0.0, False, np.zeros(2)
+            )
         contact = _find_contact(h, e, n, _nodes(h, e), self.centre, preferred)
         residual[:N] += lam * (contact.normal @ contact.jac)
         residual[N] = contact.distance - self.rho
@@ -279,8 +281,9 @@ class _Problem:
             sticking = abs(trial) <= limit
             friction = trial if sticking else float(np.copysign(limit, trial))
             residual[:N] -= friction * (contact.tangent @ contact.jac)
-        return _Evaluation(psi, lam, residual, state, moment, stiff, e, contact,
-                           friction, sticking, slip_vec)
+        return _Evaluation(
+            psi, lam, residual, state, moment, stiff, e, contact, friction, sticking, slip_vec
+        )
 
     def jacobian(self, ev: _Evaluation) -> np.ndarray:
         """Exact derivative of ``ev.residual`` with respect to ``(psi, lam)``."""
@@ -416,8 +419,13 @@ def solve_rod(
     """
     h = np.asarray(segment_lengths_mm, dtype=float)
     problem = _Problem(
-        section, h, width_mm=width_mm, bending_length_mm=bending_length_mm,
-        contact_radius_mm=contact_radius_mm, friction=friction, tension_n=tension_n,
+        section,
+        h,
+        width_mm=width_mm,
+        bending_length_mm=bending_length_mm,
+        contact_radius_mm=contact_radius_mm,
+        friction=friction,
+        tension_n=tension_n,
     )
     at_rest = (0.0, 0.0, 0.0, bending_length_mm, 0.0, 0.0)
     history = [
@@ -477,10 +485,11 @@ def _march(
 
 
 def _check_contact(ev: _Evaluation, n_segments: int, theta: float) -> None:
+    if ev.contact is None:
+        return
     if ev.contact.upstream >= n_segments:
         raise SolverError(
-            f"the strip slid off the probe at {np.degrees(theta):.2f}°; "
-            "increase free_length_mm"
+            f"the strip slid off the probe at {np.degrees(theta):.2f}°; increase free_length_mm"
         )
     if ev.lam < 0.0:
         raise SolverError(
@@ -509,11 +518,17 @@ def solve_cantilever(
     """
     h = np.asarray(segment_lengths_mm, dtype=float)
     length = float(np.sum(h))
-    problem = _Problem(section, h, width_mm=width_mm, bending_length_mm=length,
-                       contact_radius_mm=None, friction=0.0, tension_n=0.0)
+    problem = _Problem(
+        section,
+        h,
+        width_mm=width_mm,
+        bending_length_mm=length,
+        contact_radius_mm=None,
+        friction=0.0,
+        tension_n=0.0,
+    )
     theta = 0.5 * np.pi
-    current = problem.configuration(np.full(h.size, theta), 0.0,
-                                    section.initial_state(h.size), 0.0)
+    current = problem.configuration(np.full(h.size, theta), 0.0, section.initial_state(h.size), 0.0)
     tips, rotations = [], []
     load_done = 0.0
     for load in np.asarray(loads_n, dtype=float):

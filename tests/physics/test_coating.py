@@ -50,8 +50,9 @@ def test_elastic_slope_is_D_exactly(tcoat):
 def test_fully_plastic_moment_is_Mp_exactly(tcoat):
     section = _section(tcoat_mm=tcoat)
     kappa_full = 200.0 / (1000.0 * (T / 2 - tcoat))  # innermost coat fibre yields
-    m, c, _ = section.respond(np.array([1.01 * kappa_full, -3 * kappa_full]),
-                              section.initial_state(2))
+    m, c, _ = section.respond(
+        np.array([1.01 * kappa_full, -3 * kappa_full]), section.initial_state(2)
+    )
     Mp = plastic_moment(200.0, tcoat, T)
     np.testing.assert_allclose(m, [Mp, -Mp], rtol=1e-12)
     np.testing.assert_allclose(c, 0.0, atol=1e-12)

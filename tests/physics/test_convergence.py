@@ -10,8 +10,15 @@ L, B = 10.0, 38.0
 
 
 def _f60(section, mesh, *, mu=0.1, rho=1.6):
-    run = solve_rod(section, np.arange(0.0, 61.0), segment_lengths_mm=mesh, width_mm=B,
-                    bending_length_mm=L, contact_radius_mm=rho, friction=mu)
+    run = solve_rod(
+        section,
+        np.arange(0.0, 61.0),
+        segment_lengths_mm=mesh,
+        width_mm=B,
+        bending_length_mm=L,
+        contact_radius_mm=rho,
+        friction=mu,
+    )
     return run.force_n[-1]
 
 
@@ -26,8 +33,10 @@ def test_observed_order_and_default_error(ecoat, scoat, tcoat):
     reference = f60[-1]  # 8× finer than the default
     errors = np.abs(f60[:-1] / reference - 1.0)
     orders = np.log2(errors[:-1] / errors[1:])
-    print(f"\nF60 relative error at h = l/12.5, l/25 (default), l/50: {errors}; "
-          f"observed orders {orders}")
+    print(
+        f"\nF60 relative error at h = l/12.5, l/25 (default), l/50: {errors}; "
+        f"observed orders {orders}"
+    )
     assert errors[1] < 5e-3, "default discretisation must be within 0.5 %"
     assert np.all(orders > 1.5), f"expected about second order, observed {orders}"
 

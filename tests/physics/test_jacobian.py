@@ -44,8 +44,15 @@ def _check(problem, previous, psi, lam, theta):
     ],
 )
 def test_jacobian_matches_finite_differences(mesh, section, mu, angle, tension, expect):
-    problem = _Problem(section, mesh, width_mm=B, bending_length_mm=L, contact_radius_mm=1.6,
-                       friction=mu, tension_n=tension)
+    problem = _Problem(
+        section,
+        mesh,
+        width_mm=B,
+        bending_length_mm=L,
+        contact_radius_mm=1.6,
+        friction=mu,
+        tension_n=tension,
+    )
     previous = _converged_at(problem, angle - 1)
     # An iterate near, not at, the solution of the next step.
     rng = np.random.default_rng(0)
@@ -56,7 +63,9 @@ def test_jacobian_matches_finite_differences(mesh, section, mu, angle, tension, 
         # have no kink there. Turn the contact segment so that the probe centre
         # projects past its end and kink the strip at that node: the probe then
         # sits in the wedge of a convex kink, the vertex branch.
-        k = problem.evaluate(previous.psi, previous.lam, np.radians(angle), previous).contact.segment
+        k = problem.evaluate(
+            previous.psi, previous.lam, np.radians(angle), previous
+        ).contact.segment
         psi[k] += 0.02
         psi[k + 1 :] -= 0.08
     ev = _check(problem, previous, psi, previous.lam * 1.01, np.radians(angle))

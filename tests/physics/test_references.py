@@ -28,8 +28,15 @@ def _elastic(ecoat=1000.0, tcoat=0.012):
 
 
 def _point_probe_run(section, mu, angles):
-    return solve_rod(section, angles, segment_lengths_mm=default_mesh(35.0, L), width_mm=B,
-                     bending_length_mm=L, contact_radius_mm=POINT_PROBE_MM, friction=mu)
+    return solve_rod(
+        section,
+        angles,
+        segment_lengths_mm=default_mesh(35.0, L),
+        width_mm=B,
+        bending_length_mm=L,
+        contact_radius_mm=POINT_PROBE_MM,
+        friction=mu,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -48,8 +55,7 @@ def test_elastica_table(elastica, mu):
     np.testing.assert_allclose(run.force_n[1:] / unit, table.resultant, rtol=RTOL)
     np.testing.assert_allclose(run.force_perp_n[1:] / unit, table.perp, rtol=RTOL)
     np.testing.assert_allclose(run.contact_arc_mm[1:] / L, table.contact_arc, rtol=RTOL)
-    np.testing.assert_allclose(run.clamp_moment_nmm[1:] / (unit * L), table.clamp_moment,
-                               rtol=RTOL)
+    np.testing.assert_allclose(run.clamp_moment_nmm[1:] / (unit * L), table.clamp_moment, rtol=RTOL)
 
 
 def test_small_angle_formula():
@@ -65,9 +71,12 @@ def test_cantilever_table(reference_dir):
     section = _elastic()
     length, width = 20.0, 10.0
     EI = section.stiffness_nmm * width
-    tips, rotation = solve_cantilever(section, table.alpha.to_numpy() * EI / length**2,
-                                      segment_lengths_mm=uniform_mesh(length, length / 50),
-                                      width_mm=width)
+    tips, rotation = solve_cantilever(
+        section,
+        table.alpha.to_numpy() * EI / length**2,
+        segment_lengths_mm=uniform_mesh(length, length / 50),
+        width_mm=width,
+    )
     np.testing.assert_allclose(tips[:, 0] / length, table.w_over_L, rtol=RTOL)
     np.testing.assert_allclose(tips[:, 1] / length, table.u_over_L, rtol=RTOL)
     np.testing.assert_allclose(rotation, table.tip_rotation_rad, rtol=RTOL)
