@@ -39,7 +39,11 @@ __all__ = ["RodSolution", "default_mesh", "solve_cantilever", "solve_rod", "unif
 
 _HYSTERESIS = 0.05  # of a segment length, see _find_contact
 _STICK_STIFFNESS_FACTOR = 1e5  # tangential penalty of sticking, in units of EI/l³
-_MAX_NEWTON = 30
+_MAX_NEWTON = 40
+_MAX_BACKTRACKS = 6
+_STALL_ITERATIONS = 6
+_STALL_TOLERANCE = 1e-5  # scaled residual accepted when Newton stalls, see _newton
+_UNLOADING_FLOOR = 0.05  # of the elastic section stiffness, see _newton
 _MAX_BISECTIONS = 8
 
 
@@ -178,6 +182,7 @@ class _Evaluation:
     state: SectionState  # after the return mapping
     moment: np.ndarray  # (N,) total moment at nodes 0..N-1 [N·mm]
     stiff: np.ndarray  # (N,) tangent dM/dkappa / ell [N·mm]
+    kappa: np.ndarray  # (N,) curvature at the nodes [1/mm]
     e: np.ndarray
     contact: _Contact | None  # None without a probe
     friction_n: float  # friction force on the strip along the contact tangent [N]
@@ -226,6 +231,7 @@ class _Problem:
         ell[1:] = 0.5 * (h[:-1] + h[1:])
         self.ell = ell
         self.stiffness_scale = section.stiffness_nmm * width_mm / bending_length_mm
+        self.elastic_stiff = section.stiffness_nmm * width_mm / self.ell
         self.stick_stiffness = _STICK_STIFFNESS_FACTOR * self.stiffness_scale / bending_length_mm**2
         self._diag = np.arange(self.N)
 
@@ -261,7 +267,7 @@ class _Problem:
         if not self.has_probe:
             residual[N] = lam
             return _Evaluation(
-                psi, lam, residual, state, moment, stiff, e, None, 0.0, False, np.zeros(2)
+                psi, lam, residual, state, moment, stiff, kappa, e, None, 0.0, False, np.zeros(2)
             )
         contact = _find_contact(h, e, n, _nodes(h, e), self.centre, preferred)
         residual[:N] += lam * (contact.normal @ contact.jac)
@@ -282,21 +288,36 @@ class _Problem:
             friction = trial if sticking else float(np.copysign(limit, trial))
             residual[:N] -= friction * (contact.tangent @ contact.jac)
         return _Evaluation(
-            psi, lam, residual, state, moment, stiff, e, contact, friction, sticking, slip_vec
+            psi,
+            lam,
+            residual,
+            state,
+            moment,
+            stiff,
+            kappa,
+            e,
+            contact,
+            friction,
+            sticking,
+            slip_vec,
         )
 
-    def jacobian(self, ev: _Evaluation) -> np.ndarray:
-        """Exact derivative of ``ev.residual`` with respect to ``(psi, lam)``."""
+    def jacobian(self, ev: _Evaluation, stiff: np.ndarray | None = None) -> np.ndarray:
+        """Exact derivative of ``ev.residual`` with respect to ``(psi, lam)``.
+
+        ``stiff`` replaces the section tangents (see :func:`_newton`).
+        """
         N, h, idx = self.N, self.h, self._diag
         contact, lam = ev.contact, ev.lam
+        stiff = ev.stiff if stiff is None else stiff
         jacobian = np.zeros((N + 1, N + 1))
-        diag = ev.stiff.copy()
-        diag[:-1] += ev.stiff[1:]
+        diag = stiff.copy()
+        diag[:-1] += stiff[1:]
         if self.tension:
             diag += self.tension * h * ev.e[:, 0]
         jacobian[idx, idx] = diag
-        jacobian[idx[:-1], idx[1:]] = -ev.stiff[1:]
-        jacobian[idx[1:], idx[:-1]] = -ev.stiff[1:]
+        jacobian[idx[:-1], idx[1:]] = -stiff[1:]
+        jacobian[idx[1:], idx[:-1]] = -stiff[1:]
         if contact is None:
             jacobian[N, N] = 1.0
             return jacobian
@@ -345,28 +366,75 @@ def _newton(
     theta: float,
     previous: _Configuration,
 ) -> _Evaluation | None:
-    """Solve one load step; ``None`` when Newton does not converge."""
-    moment_tol = 1e-9 * problem.stiffness_scale
-    gap_tol = 1e-10 * problem.centre[0]
+    """Solve one load step; ``None`` when Newton does not converge.
+
+    The moment–curvature law is only piecewise smooth (each coat fibre kinks
+    at its yield point). Where a node's tangent changed between the last two
+    iterates, its secant slope replaces the tangent, and a backtracking line
+    search on the scaled residual guards the step: together they stop the
+    cycling of plain Newton when a fibre sits at its yield point.
+    """
+    weights = np.full(problem.N + 1, 1.0 / problem.stiffness_scale)
+    weights[-1] = 1.0 / problem.centre[0]
+    tolerance = np.full(problem.N + 1, 1e-9)
+    tolerance[-1] = 1e-10
     preferred = None
-    for _ in range(_MAX_NEWTON):
+
+    def attempt(psi: np.ndarray, lam: float) -> tuple[_Evaluation, float]:
+        nonlocal preferred
         ev = problem.evaluate(psi, lam, theta, previous, preferred)
         if ev.contact is not None and not ev.contact.on_vertex:
             preferred = ev.contact.segment
-        residual = ev.residual
-        if not np.all(np.isfinite(residual)):
+        merit = float(np.sum((ev.residual * weights) ** 2))
+        return ev, merit if np.isfinite(merit) else np.inf
+
+    ev, merit = attempt(psi, lam)
+    stiff = None
+    best, since_best = merit, 0
+    for _ in range(_MAX_NEWTON):
+        if not np.isfinite(merit):
             return None
-        if np.max(np.abs(residual[:-1])) < moment_tol and abs(residual[-1]) < gap_tol:
+        scaled = np.abs(ev.residual * weights)
+        if np.all(scaled < tolerance):
+            return ev
+        if since_best >= _STALL_ITERATIONS and np.all(scaled < _STALL_TOLERANCE):
+            # Stalled at a kink where a plastic hinge passes from one node to
+            # the next: the residual is already negligible (≤ 1e-5 of D·b/l).
             return ev
         try:
-            delta = np.linalg.solve(problem.jacobian(ev), -residual)
+            delta = np.linalg.solve(problem.jacobian(ev, stiff), -ev.residual)
         except np.linalg.LinAlgError:
             return None
         # Limit the rotation update: the contact search is only valid nearby.
-        scale = min(1.0, 0.2 / max(float(np.max(np.abs(delta[:-1]))), 1e-300))
-        psi = psi + scale * delta[:-1]
-        lam = lam + scale * delta[-1]
+        step = min(1.0, 0.2 / max(float(np.max(np.abs(delta[:-1]))), 1e-300))
+        full_step = step
+        for _ in range(_MAX_BACKTRACKS):
+            trial, trial_merit = attempt(ev.psi + step * delta[:-1], ev.lam + step * delta[-1])
+            if trial_merit < (1.0 - 1e-4 * step) * merit:
+                break
+            step *= 0.5
+        stiff = _secant_stiffness(problem, ev, trial)
+        if step < full_step:
+            # A kink stopped the full step: let fully plastic nodes see that
+            # they may unload (their tangent is zero on the loading side).
+            stiff = np.maximum(stiff, _UNLOADING_FLOOR * problem.elastic_stiff)
+        ev, merit = trial, trial_merit
+        if merit < 0.5 * best:
+            best, since_best = merit, 0
+        else:
+            since_best += 1
     return None
+
+
+def _secant_stiffness(problem: _Problem, old: _Evaluation, new: _Evaluation) -> np.ndarray:
+    """Section tangents of ``new``, with secants where the tangent switched."""
+    switched = (new.stiff != old.stiff) & (np.abs(new.kappa - old.kappa) > 1e-14)
+    if not np.any(switched):
+        return new.stiff
+    stiff = new.stiff.copy()
+    secant = (new.moment - old.moment)[switched] / (new.kappa - old.kappa)[switched]
+    stiff[switched] = secant / problem.ell[switched]
+    return stiff
 
 
 def _record(problem: _Problem, ev: _Evaluation) -> tuple[float, ...]:
@@ -467,6 +535,11 @@ def _march(
             guess_psi = current.psi + rates[0] * dtheta
             guess_lam = max(current.lam + rates[1] * dtheta, 0.0)
             ev = _newton(problem, guess_psi, guess_lam, theta, current)
+            if ev is None:
+                # The extrapolated predictor keeps yielding nodes yielding; where
+                # a plastic hinge moves on along the strip, start from the last
+                # converged shape instead (rotated with the clamp) before bisecting.
+                ev = _newton(problem, current.psi, current.lam, theta, current)
             if ev is None:
                 substeps *= 2
                 if substeps > 2**_MAX_BISECTIONS:
