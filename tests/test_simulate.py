@@ -111,3 +111,20 @@ def test_strip_sliding_off_the_probe_raises_solver_error():
 def test_error_types_subclass_builtins():
     assert issubclass(surrogate.InputDataError, ValueError)
     assert issubclass(surrogate.SolverError, RuntimeError)
+
+
+def test_moving_plastic_hinge_converges():
+    # Yields late (~80°): the moment peak, and with it the plastic hinge, moves
+    # from node to node; plain Newton stalls there (see _initial_stiffness).
+    curve = surrogate.simulate(0.9493146445486039, 0.15667183056099862, 0.03782233205831993)
+    assert np.all(np.isfinite(curve.force_n)) and curve.force_n[-1] > curve.force_n[60]
+
+
+def test_whole_paper_range_converges():
+    from scipy.stats import qmc
+
+    unit = qmc.LatinHypercube(d=3, seed=7).random(80)
+    low, high = np.log([0.5, 0.05, 0.01]), np.log([4.0, 0.4, 0.1])
+    for ecoat, scoat, tcoat in np.exp(low + unit * (high - low)):
+        curve = surrogate.simulate(ecoat, scoat, tcoat)
+        assert np.all(np.isfinite(curve.force_n)) and np.all(curve.force_n[1:] > 0)

@@ -31,6 +31,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 
 from .._errors import SolverError
 from ._coating import CoatingSection, SectionState
@@ -41,8 +42,9 @@ _HYSTERESIS = 0.05  # of a segment length, see _find_contact
 _STICK_STIFFNESS_FACTOR = 1e5  # tangential penalty of sticking, in units of EI/l³
 _MAX_NEWTON = 40
 _MAX_BACKTRACKS = 6
+_MAX_INITIAL_STIFFNESS = 1500
+_REFACTOR_EVERY = 25
 _STALL_ITERATIONS = 6
-_STALL_TOLERANCE = 1e-5  # scaled residual accepted when Newton stalls, see _newton
 _UNLOADING_FLOOR = 0.05  # of the elastic section stiffness, see _newton
 _MAX_BISECTIONS = 8
 
@@ -397,10 +399,8 @@ def _newton(
         scaled = np.abs(ev.residual * weights)
         if np.all(scaled < tolerance):
             return ev
-        if since_best >= _STALL_ITERATIONS and np.all(scaled < _STALL_TOLERANCE):
-            # Stalled at a kink where a plastic hinge passes from one node to
-            # the next: the residual is already negligible (≤ 1e-5 of D·b/l).
-            return ev
+        if since_best >= _STALL_ITERATIONS:
+            return None  # stalled: leave it to _initial_stiffness
         try:
             delta = np.linalg.solve(problem.jacobian(ev, stiff), -ev.residual)
         except np.linalg.LinAlgError:
@@ -423,6 +423,45 @@ def _newton(
             best, since_best = merit, 0
         else:
             since_best += 1
+    return None
+
+
+def _initial_stiffness(
+    problem: _Problem,
+    psi: np.ndarray,
+    lam: float,
+    theta: float,
+    previous: _Configuration,
+) -> _Evaluation | None:
+    """Fallback for :func:`_newton`: iterate with the elastic section stiffness.
+
+    Where a plastic hinge passes from one node to the next, two neighbouring
+    nodes sit at the plastic moment with zero tangent and the contact makes
+    the segment between them geometrically soft: Newton stalls, and only the
+    unloading of one node resolves it. Iterating with the elastic stiffness
+    (the classic initial-stiffness method) lets that node unload; it converges
+    linearly, in a few hundred cheap iterations, so it is kept for this case.
+    """
+    weights = np.full(problem.N + 1, 1.0 / problem.stiffness_scale)
+    weights[-1] = 1.0 / problem.centre[0]
+    ev = problem.evaluate(psi, lam, theta, previous)
+    factors = None
+    for iteration in range(_MAX_INITIAL_STIFFNESS):
+        scaled = np.abs(ev.residual * weights)
+        if not np.all(np.isfinite(scaled)):
+            return None
+        if np.all(scaled[:-1] < 1e-9) and scaled[-1] < 1e-10:
+            return ev
+        if iteration % _REFACTOR_EVERY == 0:  # the contact geometry drifts slowly
+            try:
+                factors = scipy.linalg.lu_factor(
+                    problem.jacobian(ev, problem.elastic_stiff), check_finite=False
+                )
+            except (np.linalg.LinAlgError, ValueError):
+                return None
+        delta = scipy.linalg.lu_solve(factors, -ev.residual, check_finite=False)
+        preferred = None if ev.contact is None or ev.contact.on_vertex else ev.contact.segment
+        ev = problem.evaluate(ev.psi + delta[:-1], ev.lam + delta[-1], theta, previous, preferred)
     return None
 
 
@@ -536,10 +575,7 @@ def _march(
             guess_lam = max(current.lam + rates[1] * dtheta, 0.0)
             ev = _newton(problem, guess_psi, guess_lam, theta, current)
             if ev is None:
-                # The extrapolated predictor keeps yielding nodes yielding; where
-                # a plastic hinge moves on along the strip, start from the last
-                # converged shape instead (rotated with the clamp) before bisecting.
-                ev = _newton(problem, current.psi, current.lam, theta, current)
+                ev = _initial_stiffness(problem, guess_psi, guess_lam, theta, current)
             if ev is None:
                 substeps *= 2
                 if substeps > 2**_MAX_BISECTIONS:
