@@ -12,10 +12,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from ._doe import DESIGNS
 from ._errors import InputDataError, SolverError
 from ._io import atomic_write_text
 from ._rig import Rig
 from ._simulate import BendingCurve, simulate
+from ._surrogate_commands import doe, fit, predict
+from .gp import cross_validation_table
 
 __all__ = ["main"]
 
@@ -70,7 +73,95 @@ def _build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--out", type=Path, help="write angle_deg,force_n,force_perp_n to this CSV")
     sim.add_argument("--json", action="store_true", help="print one JSON object")
     sim.set_defaults(handler=_simulate)
+
+    design = commands.add_parser("doe", help="make a design of experiments, optionally run it")
+    design.add_argument(
+        "--design",
+        choices=DESIGNS,
+        default="lhs",
+        help="factorial (--n levels per parameter), lhs, sobol, or paper "
+        "(the paper's 64 Table-1 cases)",
+    )
+    design.add_argument("--n", type=int, default=16, help="points (levels for factorial)")
+    design.add_argument("--seed", type=int, default=None, help="seed (default: the study's, or 0)")
+    design.add_argument("--study", type=Path, help="take ranges and rig from this study file")
+    design.add_argument("--run", action="store_true", help="run the full solver on the design")
+    design.add_argument("--jobs", type=int, default=1, help="worker processes for --run")
+    design.add_argument(
+        "--cache",
+        type=Path,
+        default=None,
+        help="result cache folder (default: .solver-cache next to --out)",
+    )
+    design.add_argument("--out", type=Path, required=True, help="CSV to write")
+    design.add_argument("--json", action="store_true", help="print one JSON object")
+    design.set_defaults(handler=_doe)
+
+    fitting = commands.add_parser("fit", help="fit the GP surrogates to a sample set")
+    fitting.add_argument("samples", type=Path, help="sample set CSV (from doe --run)")
+    fitting.add_argument("--out", type=Path, help="model JSON to write")
+    fitting.add_argument("--seed", type=int, default=0, help="seed of the optimiser restarts")
+    fitting.add_argument("--json", action="store_true", help="print one JSON object")
+    fitting.set_defaults(handler=_fit)
+
+    prediction = commands.add_parser("predict", help="predict F60 and theta_sat at points")
+    prediction.add_argument("model", type=Path, help="model JSON (from fit)")
+    prediction.add_argument("points", type=Path, help="CSV with the parameter columns")
+    prediction.add_argument("--out", type=Path, help="CSV to write (points + predictions)")
+    prediction.add_argument("--json", action="store_true", help="print one JSON object")
+    prediction.set_defaults(handler=_predict)
     return parser
+
+
+def _doe(args: argparse.Namespace) -> int:
+    result = doe(
+        args.design,
+        n=args.n,
+        seed=args.seed,
+        study=args.study,
+        run=args.run,
+        jobs=args.jobs,
+        out=args.out,
+        cache_dir=args.cache,
+        progress=not args.json and sys.stderr.isatty(),
+    )
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(f"{result.design} design: {result.n_points} points written to {result.out}")
+    if result.ran:
+        print(
+            f"solver runs: {result.n_ok} ok, {result.n_failed} failed; "
+            f"{result.solver_calls} solved now, {result.cached} from the cache"
+        )
+    return 0
+
+
+def _fit(args: argparse.Namespace) -> int:
+    result = fit(args.samples, out=args.out, seed=args.seed)
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(
+        f"fitted on {result.n_train} successful runs"
+        + (f"; model written to {result.model}" if result.model else "")
+    )
+    print(cross_validation_table({"f60_n": result.f60_n, "theta_sat_deg": result.theta_sat_deg}))
+    return 0
+
+
+def _predict(args: argparse.Namespace) -> int:
+    result = predict(args.model, args.points, out=args.out)
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    for row in result.predictions[:20]:
+        print(", ".join(f"{k}={v:.4g}" for k, v in row.items()))
+    if result.n_points > 20:
+        print(f"… {result.n_points - 20} more")
+    if result.out:
+        print(f"predictions written to {result.out}")
+    return 0
 
 
 def _simulate(args: argparse.Namespace) -> int:

@@ -1,0 +1,340 @@
+"""Study files (``studies/*.toml``): one schema for every command.
+
+Validated on load into a frozen :class:`StudySpec`; a bad file raises
+:class:`InputDataError` with one line naming the key, the value and the fix,
+before anything is written anywhere.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ._errors import InputDataError
+from ._rig import Rig
+from ._space import COATING_PARAMETERS, PAPER_SPACE, ParameterSpace, ParameterSpec
+
+__all__ = ["Budget", "Constraints", "StudySpec", "Targets", "load_study"]
+
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+SOLVER_KINDS = ("builtin",)
+_UNITS = {"ecoat_gpa": "GPa", "scoat_gpa": "GPa", "tcoat_mm": "mm"}
+_SECTIONS = (
+    "study",
+    "solver",
+    "rig",
+    "parameters",
+    "targets",
+    "measurements",
+    "constraints",
+    "preferences",
+    "model",
+    "budget",
+)
+
+
+@dataclass(frozen=True)
+class Targets:
+    """Scalar targets: F60 [N] with a relative tolerance."""
+
+    f60_n: float | None = None
+    tolerance: float = 0.01
+
+
+@dataclass(frozen=True)
+class Constraints:
+    """``c(x) ≤ 0`` is feasible; each field is one rule (None: not imposed)."""
+
+    theta_sat_deg_min: float | None = 80.0
+    tcoat_max_fraction_of_thickness: float | None = 0.1
+
+
+@dataclass(frozen=True)
+class Budget:
+    initial_samples: int = 8
+    max_solver_calls: int = 30
+    candidates_per_iteration: int = 2
+    surrogate_trials: int = 300
+
+
+@dataclass(frozen=True)
+class StudySpec:
+    """A validated study file."""
+
+    name: str
+    path: Path | None
+    seed: int = 0
+    solver: str = "builtin"
+    rig: Rig = field(default_factory=Rig)
+    space: ParameterSpace = PAPER_SPACE
+    targets: Targets = field(default_factory=Targets)
+    measurements_file: Path | None = None
+    noise_n: float | None = None
+    constraints: Constraints = field(default_factory=Constraints)
+    preference_order: tuple[str, ...] = ("tcoat_mm", "scoat_gpa")
+    effects: tuple[str, ...] = ()
+    budget: Budget = field(default_factory=Budget)
+    storage: str | None = None
+
+    @property
+    def directory(self) -> Path:
+        return self.path.parent if self.path is not None else Path.cwd()
+
+    def default_storage(self) -> str:
+        """``sqlite:///`` file next to the study file."""
+        if self.storage:
+            return self.storage
+        return f"sqlite:///{(self.directory / f'{self.name}.db').resolve()}"
+
+
+def load_study(path: str | Path) -> StudySpec:
+    """Read and validate a study file."""
+    path = Path(path)
+    if not path.exists():
+        raise InputDataError(f"study file {path} does not exist; check the path")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as error:
+        raise InputDataError(f"{path}: not valid TOML ({error})") from None
+    except UnicodeDecodeError:
+        raise InputDataError(f"{path}: not a UTF-8 text file") from None
+    return parse_study(data, path)
+
+
+def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
+    where = str(path) if path is not None else "study"
+    _only(data, _SECTIONS, where, "")
+    study = _section(data, "study", where)
+    _only(study, ("name", "seed", "storage"), where, "study")
+    name = study.get("name")
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise InputDataError(
+            f"{where}: [study] name must be 1–64 letters, digits, '_', '.' or '-', got {name!r}"
+        )
+    seed = _int(study.get("seed", 0), where, "study.seed", low=0)
+    storage = study.get("storage")
+    if storage is not None and not isinstance(storage, str):
+        raise InputDataError(f"{where}: [study] storage must be a URL string, got {storage!r}")
+    solver = _section(data, "solver", where)
+    _only(solver, ("kind",), where, "solver")
+    kind = solver.get("kind", "builtin")
+    if kind not in SOLVER_KINDS:
+        raise InputDataError(
+            f"{where}: [solver] kind must be one of {', '.join(SOLVER_KINDS)}, got {kind!r}"
+        )
+    rig = _rig(_section(data, "rig", where), where)
+    space = _space(_section(data, "parameters", where), where)
+    targets, measurements = _targets(data, where, path)
+    noise = _section(data, "measurements", where).get("noise_n")
+    constraints = _constraints(_section(data, "constraints", where), where)
+    preferences = _section(data, "preferences", where)
+    _only(preferences, ("order",), where, "preferences")
+    order = tuple(preferences.get("order", ("tcoat_mm", "scoat_gpa")))
+    for item in order:
+        if item not in space.names:
+            raise InputDataError(
+                f"{where}: [preferences] order names {item!r}, which is not a "
+                f"parameter; use some of {', '.join(space.names)}"
+            )
+    model = _section(data, "model", where)
+    _only(model, ("effects",), where, "model")
+    effects = tuple(model.get("effects", ()))
+    if effects:
+        raise InputDataError(
+            f"{where}: [model] effects are not available yet, got {list(effects)}; remove the key"
+        )
+    budget = _budget(_section(data, "budget", where), where)
+    if targets.f60_n is None and measurements is None:
+        raise InputDataError(
+            f"{where}: a study needs [targets] f60_n or [measurements] file; add one"
+        )
+    return StudySpec(
+        name=name,
+        path=path,
+        seed=seed,
+        solver=kind,
+        rig=rig,
+        space=space,
+        targets=targets,
+        measurements_file=measurements,
+        noise_n=None if noise is None else _positive(noise, where, "measurements.noise_n"),
+        constraints=constraints,
+        preference_order=order,
+        effects=effects,
+        budget=budget,
+        storage=storage,
+    )
+
+
+def _section(data: dict[str, Any], name: str, where: str) -> dict[str, Any]:
+    section = data.get(name, {})
+    if not isinstance(section, dict):
+        raise InputDataError(f"{where}: [{name}] must be a table, got {section!r}")
+    return section
+
+
+def _only(section: dict[str, Any], allowed: tuple[str, ...], where: str, name: str) -> None:
+    for key in section:
+        if key not in allowed:
+            place = f"in [{name}]" if name else "section"
+            raise InputDataError(f"{where}: unknown {place} {key!r}; allowed: {', '.join(allowed)}")
+
+
+def _int(value: Any, where: str, key: str, *, low: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+        raise InputDataError(f"{where}: {key} must be a whole number ≥ {low}, got {value!r}")
+    return value
+
+
+def _positive(value: Any, where: str, key: str) -> float:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | float)
+        or not value > 0
+        or value != value
+        or value == float("inf")
+    ):
+        raise InputDataError(f"{where}: {key} must be a number > 0, got {value!r}")
+    return float(value)
+
+
+def _rig(section: dict[str, Any], where: str) -> Rig:
+    allowed = tuple(Rig.__dataclass_fields__)
+    _only(section, allowed, where, "rig")
+    try:
+        return Rig(**section)
+    except InputDataError as error:
+        raise InputDataError(f"{where}: [rig] {error}") from None
+
+
+def _space(section: dict[str, Any], where: str) -> ParameterSpace:
+    if not section:
+        return PAPER_SPACE
+    specs = []
+    for name, value in section.items():
+        if name not in COATING_PARAMETERS:
+            raise InputDataError(
+                f"{where}: [parameters] {name!r} is not a coating parameter; "
+                f"use {', '.join(COATING_PARAMETERS)}"
+            )
+        if not isinstance(value, dict):
+            raise InputDataError(
+                f"{where}: [parameters] {name} must be "
+                f"{{ low = …, high = …, log = true }}, got {value!r}"
+            )
+        _only(value, ("low", "high", "log", "unit"), where, f"parameters.{name}")
+        unit = value.get("unit", _UNITS[name])
+        if unit != _UNITS[name]:
+            raise InputDataError(
+                f"{where}: [parameters] {name} is in {_UNITS[name]}, got unit "
+                f"{unit!r}; convert the bounds"
+            )
+        try:
+            specs.append(
+                ParameterSpec(
+                    name,
+                    _positive(value.get("low"), where, f"{name}.low"),
+                    _positive(value.get("high"), where, f"{name}.high"),
+                    log=bool(value.get("log", True)),
+                    unit=unit,
+                )
+            )
+        except InputDataError as error:
+            raise InputDataError(f"{where}: [parameters] {error}") from None
+    missing = [n for n in COATING_PARAMETERS if n not in section]
+    if missing:
+        raise InputDataError(
+            f"{where}: [parameters] must declare all of "
+            f"{', '.join(COATING_PARAMETERS)}; missing {', '.join(missing)}"
+        )
+    return ParameterSpace(tuple(specs))
+
+
+def _targets(data: dict[str, Any], where: str, path: Path | None) -> tuple[Targets, Path | None]:
+    section = _section(data, "targets", where)
+    _only(section, ("f60_n", "tolerance", "measurements"), where, "targets")
+    f60 = section.get("f60_n")
+    f60 = None if f60 is None else _positive(f60, where, "targets.f60_n")
+    tolerance = _positive(section.get("tolerance", 0.01), where, "targets.tolerance")
+    if tolerance >= 1.0:
+        raise InputDataError(
+            f"{where}: targets.tolerance is relative and must be < 1, got {tolerance:g}"
+        )
+    measurements = _section(data, "measurements", where)
+    _only(measurements, ("file", "noise_n"), where, "measurements")
+    file = measurements.get("file", section.get("measurements"))
+    resolved = None
+    if file is not None:
+        if not isinstance(file, str):
+            raise InputDataError(f"{where}: measurements file must be a path string, got {file!r}")
+        base = path.parent if path is not None else Path.cwd()
+        resolved = (base / file).resolve()
+        if not resolved.is_relative_to(base.resolve().parent):
+            raise InputDataError(
+                f"{where}: measurements file {file!r} leaves the project folder; keep data under it"
+            )
+    return Targets(f60, tolerance), resolved
+
+
+def _constraints(section: dict[str, Any], where: str) -> Constraints:
+    _only(section, ("theta_sat_deg_min", "tcoat_max_fraction_of_thickness"), where, "constraints")
+    theta = section.get("theta_sat_deg_min", 80.0)
+    fraction = section.get("tcoat_max_fraction_of_thickness", 0.1)
+    if theta is not None:
+        theta = _positive(theta, where, "constraints.theta_sat_deg_min")
+        if theta > 90.0:
+            raise InputDataError(
+                f"{where}: constraints.theta_sat_deg_min must be ≤ 90 "
+                f"(the tested range), got {theta:g}"
+            )
+    if fraction is not None:
+        fraction = _positive(fraction, where, "constraints.tcoat_max_fraction_of_thickness")
+        if fraction >= 0.5:
+            raise InputDataError(
+                f"{where}: constraints.tcoat_max_fraction_of_thickness must be "
+                f"< 0.5, got {fraction:g}"
+            )
+    return Constraints(theta, fraction)
+
+
+def _budget(section: dict[str, Any], where: str) -> Budget:
+    _only(
+        section,
+        ("initial_samples", "max_solver_calls", "candidates_per_iteration", "surrogate_trials"),
+        where,
+        "budget",
+    )
+    default = Budget()
+    initial = _int(
+        section.get("initial_samples", default.initial_samples),
+        where,
+        "budget.initial_samples",
+        low=3,
+    )
+    calls = _int(
+        section.get("max_solver_calls", default.max_solver_calls),
+        where,
+        "budget.max_solver_calls",
+        low=1,
+    )
+    if calls < initial:
+        raise InputDataError(
+            f"{where}: budget.max_solver_calls ({calls}) must be ≥ "
+            f"budget.initial_samples ({initial})"
+        )
+    per = _int(
+        section.get("candidates_per_iteration", default.candidates_per_iteration),
+        where,
+        "budget.candidates_per_iteration",
+        low=1,
+    )
+    trials = _int(
+        section.get("surrogate_trials", default.surrogate_trials),
+        where,
+        "budget.surrogate_trials",
+        low=10,
+    )
+    return Budget(initial, calls, per, trials)

@@ -1,0 +1,198 @@
+"""``doe``, ``fit`` and ``predict``: sample sets and the GP surrogate."""
+
+from __future__ import annotations
+
+import io
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ._batch import evaluate_design
+from ._doe import make_design
+from ._errors import InputDataError
+from ._io import atomic_write_text
+from ._rig import Rig
+from ._samples import SampleSet, read_points
+from ._space import PAPER_SPACE, ParameterSpace
+from ._study import StudySpec, load_study
+from .gp import CoatingSurrogate
+
+__all__ = ["DoeResult", "FitResult", "PredictResult", "doe", "fit", "fit_surrogate", "predict"]
+
+
+@dataclass(frozen=True)
+class DoeResult:
+    """Keys of ``surrogate doe --json``."""
+
+    design: str
+    n_points: int
+    out: str
+    ran: bool
+    n_ok: int
+    n_failed: int
+    solver_calls: int
+    cached: int
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Keys of ``surrogate fit --json``: the cross-validation of each output."""
+
+    f60_n: dict[str, float]
+    theta_sat_deg: dict[str, float]
+    n_train: int
+    model: str | None
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class PredictResult:
+    """Keys of ``surrogate predict --json``."""
+
+    n_points: int
+    out: str | None
+    predictions: list[dict[str, float]]
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _study_or_none(study: str | Path | StudySpec | None) -> StudySpec | None:
+    if study is None or isinstance(study, StudySpec):
+        return study
+    return load_study(study)
+
+
+def doe(
+    design: str = "lhs",
+    *,
+    n: int = 16,
+    seed: int | None = None,
+    study: str | Path | StudySpec | None = None,
+    run: bool = False,
+    jobs: int = 1,
+    out: str | Path,
+    cache_dir: str | Path | None = None,
+    progress: bool = True,
+) -> DoeResult:
+    """Make a design (ranges from ``study`` or the paper's) and optionally run it.
+
+    Without ``run`` the design points are written to ``out``; with ``run`` the
+    full solver evaluates them and ``out`` is a sample set (plus curves and a
+    JSON sidecar). Cache: ``cache_dir`` or ``.solver-cache/`` next to ``out``.
+    """
+    spec = _study_or_none(study)
+    space = spec.space if spec is not None else PAPER_SPACE
+    rig = spec.rig if spec is not None else Rig()
+    seed = seed if seed is not None else (spec.seed if spec is not None else 0)
+    out = Path(out)
+    if not out.parent.exists():
+        raise InputDataError(f"output folder {out.parent} does not exist; create it first")
+    points = make_design(design, space, n=n, seed=seed)
+    if not run:
+        buffer = io.StringIO()
+        points.to_csv(buffer, index=False, float_format="%.10g")
+        atomic_write_text(out, buffer.getvalue())
+        return DoeResult(design, len(points), str(out), False, 0, 0, 0, 0)
+    cache = Path(cache_dir) if cache_dir is not None else out.parent / ".solver-cache"
+    samples = evaluate_design(
+        points,
+        space,
+        rig=rig,
+        jobs=jobs,
+        cache_dir=cache,
+        progress=progress,
+        meta={"design": design, "seed": seed},
+    )
+    samples.write(out)
+    calls = int(samples.meta["solver_calls"])
+    return DoeResult(
+        design,
+        len(points),
+        str(out),
+        True,
+        len(samples.ok),
+        samples.n_failed,
+        calls,
+        len(points) - calls,
+    )
+
+
+def fit_surrogate(samples: SampleSet, *, seed: int = 0) -> CoatingSurrogate:
+    """A :class:`CoatingSurrogate` of the successful runs of ``samples``."""
+    ok = samples.ok
+    if len(ok) < 3:
+        raise InputDataError(
+            f"the sample set has {len(ok)} successful runs; a surrogate needs at least 3"
+        )
+    X = ok[list(samples.space.names)].to_numpy(dtype=float)
+    curves = angles = None
+    if len(samples.curves):
+        angles, curves = samples.curve_matrix(ok["run_id"].to_numpy())
+    max_angle = float(angles[-1]) if angles is not None else 90.0
+    return CoatingSurrogate(samples.space, seed=seed, max_angle_deg=max_angle).fit(
+        X,
+        ok["f60_n"].to_numpy(dtype=float),
+        ok["theta_sat_deg"].to_numpy(dtype=float),
+        curves,
+        angles,
+    )
+
+
+def fit(
+    samples: str | Path | SampleSet, *, out: str | Path | None = None, seed: int = 0
+) -> FitResult:
+    """Fit the surrogates to a sample set, cross-validate, and save as JSON."""
+    sample_set = samples if isinstance(samples, SampleSet) else SampleSet.read(samples)
+    if out is not None and not Path(out).parent.exists():
+        raise InputDataError(f"output folder {Path(out).parent} does not exist; create it first")
+    model = fit_surrogate(sample_set, seed=seed)
+    cv = model.cross_validate()
+    if out is not None:
+        model.save(out)
+    return FitResult(
+        cv["f60_n"], cv["theta_sat_deg"], len(sample_set.ok), None if out is None else str(out)
+    )
+
+
+def predict(
+    model: str | Path | CoatingSurrogate,
+    points: str | Path | pd.DataFrame,
+    *,
+    out: str | Path | None = None,
+) -> PredictResult:
+    """Predict F60 and θsat (with standard deviations) at the points."""
+    surrogate = model if isinstance(model, CoatingSurrogate) else CoatingSurrogate.load(model)
+    names = surrogate.space.names
+    table = points.copy() if isinstance(points, pd.DataFrame) else read_points(points, names)
+    if isinstance(points, pd.DataFrame):
+        missing = [n for n in names if n not in table]
+        if missing:
+            raise InputDataError(f"points miss column(s) {', '.join(missing)}")
+    _check_in_space(table, surrogate.space)
+    pred = surrogate.predict(table[list(names)].to_numpy(dtype=float), return_std=True)
+    for key in ("f60_n", "f60_n_std", "theta_sat_deg", "theta_sat_deg_std"):
+        table[key] = pred[key]
+    if out is not None:
+        if not Path(out).parent.exists():
+            raise InputDataError(f"output folder {Path(out).parent} does not exist")
+        buffer = io.StringIO()
+        table.to_csv(buffer, index=False, float_format="%.8g")
+        atomic_write_text(out, buffer.getvalue())
+    records = table[[*names, "f60_n", "f60_n_std", "theta_sat_deg", "theta_sat_deg_std"]]
+    return PredictResult(len(table), None if out is None else str(out), records.to_dict("records"))
+
+
+def _check_in_space(table: pd.DataFrame, space: ParameterSpace) -> None:
+    for spec in space:
+        values = table[spec.name].to_numpy(dtype=float)
+        if np.any(values <= 0.0) and spec.log:
+            raise InputDataError(f"column {spec.name} must be > 0")
