@@ -34,7 +34,9 @@ def _kernel(n_features: int, nu: float, noise_floor: float) -> Kernel:
         length[3] = 20.0  # log(Tcoat) matters little once D, Mp and S/E are given
     return ConstantKernel(1.0, (1e-3, 1e3)) * Matern(
         length_scale=length, length_scale_bounds=(1e-2, 1e3), nu=nu
-    ) + WhiteKernel(max(2.0 * noise_floor, 1e-8), (max(noise_floor, 1e-10), 1e-1))
+    ) + WhiteKernel(
+        max(2.0 * noise_floor, 1e-8), (max(noise_floor, 1e-10), max(100.0 * noise_floor, 1e-6))
+    )
 
 
 class OutputGP:

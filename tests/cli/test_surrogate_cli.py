@@ -1,0 +1,155 @@
+"""``surrogate doe | fit | predict`` end to end, and their bad input."""
+
+import hashlib
+import json
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+
+
+def _run(*args, cwd):
+    return subprocess.run(
+        [sys.executable, "-m", "surrogate", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=300,
+    )
+
+
+def _snapshot(folder):
+    return {
+        p.relative_to(folder): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("cli")
+    result = _run(
+        "doe",
+        "--design",
+        "lhs",
+        "--n",
+        "12",
+        "--seed",
+        "2",
+        "--run",
+        "--jobs",
+        "2",
+        "--out",
+        "samples.csv",
+        "--json",
+        cwd=folder,
+    )
+    assert result.returncode == 0, result.stderr
+    payload = json.loads(result.stdout)
+    assert payload["n_ok"] == 12 and payload["solver_calls"] == 12
+    return folder
+
+
+def test_doe_run_again_uses_the_cache(workdir):
+    again = json.loads(
+        _run(
+            "doe",
+            "--design",
+            "lhs",
+            "--n",
+            "12",
+            "--seed",
+            "2",
+            "--run",
+            "--out",
+            "samples2.csv",
+            "--cache",
+            ".solver-cache",
+            "--json",
+            cwd=workdir,
+        ).stdout
+    )
+    assert again["solver_calls"] == 0 and again["cached"] == 12
+
+
+def test_paper_design_without_run(workdir):
+    payload = json.loads(
+        _run("doe", "--design", "paper", "--out", "paper.csv", "--json", cwd=workdir).stdout
+    )
+    assert payload["n_points"] == 64
+    assert len(pd.read_csv(workdir / "paper.csv")) == 64
+
+
+def test_fit_prints_cv_and_json(workdir):
+    result = _run("fit", "samples.csv", "--out", "model.json", cwd=workdir)
+    assert result.returncode == 0, result.stderr
+    assert "LOO median rel err" in result.stdout and "f60_n" in result.stdout
+    payload = json.loads(_run("fit", "samples.csv", "--json", cwd=workdir).stdout)
+    for output in ("f60_n", "theta_sat_deg"):
+        assert set(payload[output]) == {"loo_median_rel_err", "loo_mae", "coverage95"}
+
+
+def test_predict_adds_columns(workdir):
+    _run("fit", "samples.csv", "--out", "model.json", cwd=workdir)
+    _run("doe", "--design", "sobol", "--n", "4", "--seed", "9", "--out", "points.csv", cwd=workdir)
+    result = _run("predict", "model.json", "points.csv", "--out", "pred.csv", cwd=workdir)
+    assert result.returncode == 0, result.stderr
+    table = pd.read_csv(workdir / "pred.csv")
+    for column in ("f60_n", "f60_n_std", "theta_sat_deg", "theta_sat_deg_std"):
+        assert column in table and table[column].notna().all()
+
+
+BAD_POINTS = {
+    "nan": "case_id,ecoat_gpa,scoat_gpa,tcoat_mm\na,1.0,nan,0.02\n",
+    "negative": "case_id,ecoat_gpa,scoat_gpa,tcoat_mm\na,1.0,0.2,-0.02\n",
+    "missing": "case_id,ecoat_gpa,scoat_gpa\na,1.0,0.2\n",
+    "text": "case_id,ecoat_gpa,scoat_gpa,tcoat_mm\na,1.0,abc,0.02\n",
+    "empty": "case_id,ecoat_gpa,scoat_gpa,tcoat_mm\n",
+}
+
+
+@pytest.mark.parametrize("kind", sorted(BAD_POINTS))
+def test_bad_points_file_is_refused_and_nothing_written(workdir, kind, tmp_path):
+    _run("fit", "samples.csv", "--out", "model.json", cwd=workdir)
+    bad = tmp_path / "bad.csv"
+    bad.write_text(BAD_POINTS[kind])
+    (tmp_path / "model.json").write_bytes((workdir / "model.json").read_bytes())
+    before = _snapshot(tmp_path)
+    result = _run("predict", "model.json", "bad.csv", "--out", "pred.csv", cwd=tmp_path)
+    assert result.returncode == 2
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert "Traceback" not in result.stderr
+    assert _snapshot(tmp_path) == before
+
+
+BAD_SAMPLES = {
+    "nan-parameter": lambda t: t.assign(ecoat_gpa=[float("nan")] + list(t.ecoat_gpa[1:])),
+    "negative-parameter": lambda t: t.assign(tcoat_mm=[-0.01] + list(t.tcoat_mm[1:])),
+    "missing-column": lambda t: t.drop(columns=["f60_n"]),
+    "bad-status": lambda t: t.assign(status=["maybe"] + list(t.status[1:])),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(BAD_SAMPLES))
+def test_bad_sample_file_is_refused_and_nothing_written(workdir, kind, tmp_path):
+    table = BAD_SAMPLES[kind](pd.read_csv(workdir / "samples.csv"))
+    table.to_csv(tmp_path / "samples.csv", index=False)
+    before = _snapshot(tmp_path)
+    result = _run("fit", "samples.csv", "--out", "model.json", cwd=tmp_path)
+    assert result.returncode == 2, result.stdout
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert _snapshot(tmp_path) == before
+
+
+def test_bad_design_request_writes_nothing(tmp_path):
+    for args in (
+        ["--design", "lhs", "--n", "0"],
+        ["--design", "grid"],
+        ["--design", "lhs", "--jobs", "0", "--run"],
+    ):
+        result = _run("doe", *args, "--out", "x.csv", cwd=tmp_path)
+        assert result.returncode == 2, (args, result.stderr)
+        assert len(result.stderr.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []

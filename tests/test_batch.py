@@ -1,0 +1,79 @@
+"""Batch evaluation: workers, cache, resume, failed runs as rows."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from surrogate import PAPER_SPACE, SampleSet, make_design
+from surrogate._batch import evaluate_design, solve_inputs
+
+
+class Counting:
+    """A solve function that counts calls and can be interrupted."""
+
+    def __init__(self, stop_after=None):
+        self.calls = 0
+        self.stop_after = stop_after
+
+    def __call__(self, inputs):
+        if self.stop_after is not None and self.calls >= self.stop_after:
+            raise KeyboardInterrupt
+        self.calls += 1
+        return solve_inputs(inputs)
+
+
+@pytest.fixture
+def design():
+    return make_design("lhs", n=6, seed=11)
+
+
+def test_cache_never_solves_a_point_twice(tmp_path, design):
+    first, second = Counting(), Counting()
+    a = evaluate_design(design, PAPER_SPACE, cache_dir=tmp_path, progress=False, solve=first)
+    b = evaluate_design(design, PAPER_SPACE, cache_dir=tmp_path, progress=False, solve=second)
+    assert first.calls == 6 and second.calls == 0
+    pd.testing.assert_frame_equal(a.runs, b.runs)
+    pd.testing.assert_frame_equal(a.curves, b.curves)
+    assert b.meta["solver_calls"] == 0
+
+
+def test_interrupted_batch_resumes_where_it_stopped(tmp_path, design):
+    with pytest.raises(KeyboardInterrupt):
+        evaluate_design(
+            design, PAPER_SPACE, cache_dir=tmp_path, progress=False, solve=Counting(stop_after=4)
+        )
+    resumed = Counting()
+    samples = evaluate_design(
+        design, PAPER_SPACE, cache_dir=tmp_path, progress=False, solve=resumed
+    )
+    assert resumed.calls == 2 and len(samples.ok) == 6
+
+
+def test_workers_give_the_same_results(tmp_path, design):
+    serial = evaluate_design(design, PAPER_SPACE, progress=False)
+    parallel = evaluate_design(design, PAPER_SPACE, jobs=2, progress=False)
+    pd.testing.assert_frame_equal(serial.runs, parallel.runs)
+
+
+def test_a_failed_run_is_a_row_with_its_reason(tmp_path):
+    design = make_design("lhs", n=3, seed=1)
+    design.loc[1, "tcoat_mm"] = 0.7  # thicker than half the webbing: refused by the solver
+    samples = evaluate_design(design, PAPER_SPACE, progress=False)
+    assert list(samples.runs.status) == ["ok", "failed", "ok"]
+    assert "tcoat_mm must be < thickness_mm/2" in samples.runs.reason.iloc[1]
+    assert np.isnan(samples.runs.f60_n.iloc[1])
+    assert set(samples.curves.run_id) == {1, 3}
+    samples.write(tmp_path / "s.csv")
+    again = SampleSet.read(tmp_path / "s.csv")
+    assert again.n_failed == 1 and len(again.ok) == 2
+
+
+def test_sample_set_round_trip(tmp_path, design):
+    samples = evaluate_design(design, PAPER_SPACE, progress=False)
+    samples.write(tmp_path / "s.csv")
+    again = SampleSet.read(tmp_path / "s.csv")
+    np.testing.assert_allclose(again.runs.f60_n, samples.runs.f60_n, rtol=1e-9)
+    angles, curves = again.curve_matrix()
+    assert curves.shape == (6, 91)
+    assert again.space == PAPER_SPACE
+    assert again.meta["solver"] == "builtin" and again.meta["rig"]["width_mm"] == 38.0
