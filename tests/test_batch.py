@@ -73,7 +73,7 @@ def test_sample_set_round_trip(tmp_path, design):
     samples.write(tmp_path / "s.csv")
     again = SampleSet.read(tmp_path / "s.csv")
     np.testing.assert_allclose(again.runs.f60_n, samples.runs.f60_n, rtol=1e-9)
-    angles, curves = again.curve_matrix()
+    _angles, curves = again.curve_matrix()
     assert curves.shape == (6, 91)
     assert again.space == PAPER_SPACE
     assert again.meta["solver"] == "builtin" and again.meta["rig"]["width_mm"] == 38.0

@@ -125,10 +125,10 @@ def test_bad_points_file_is_refused_and_nothing_written(workdir, kind, tmp_path)
 
 
 BAD_SAMPLES = {
-    "nan-parameter": lambda t: t.assign(ecoat_gpa=[float("nan")] + list(t.ecoat_gpa[1:])),
-    "negative-parameter": lambda t: t.assign(tcoat_mm=[-0.01] + list(t.tcoat_mm[1:])),
+    "nan-parameter": lambda t: t.assign(ecoat_gpa=[float("nan"), *list(t.ecoat_gpa[1:])]),
+    "negative-parameter": lambda t: t.assign(tcoat_mm=[-0.01, *list(t.tcoat_mm[1:])]),
     "missing-column": lambda t: t.drop(columns=["f60_n"]),
-    "bad-status": lambda t: t.assign(status=["maybe"] + list(t.status[1:])),
+    "bad-status": lambda t: t.assign(status=["maybe", *list(t.status[1:])]),
 }
 
 

@@ -46,7 +46,7 @@ def test_interpolates_its_training_data(samples, model):
         np.testing.assert_array_less(np.abs(fitted - target), 3 * noise_sd)
     assert np.max(np.abs(pred["f60_n"] / ok.f60_n - 1)) < 0.02
     # The curve GPs interpolate the scores; what remains is the basis truncation.
-    angles, curves = samples.curve_matrix()
+    _angles, curves = samples.curve_matrix()
     log_curves = np.log(curves[:, 1:])
     projected = (
         model.curve_mean_
@@ -78,7 +78,7 @@ def test_loo_matches_a_hand_made_split(model):
 
 def test_cross_validation_figures_from_the_loo(model):
     cv = model.cross_validate()
-    mean, std = model.f60_gp_.loo()
+    mean, _std = model.f60_gp_.loo()
     expected = np.median(np.abs(np.exp(mean) / model.f60_train_ - 1))
     assert cv["f60_n"]["loo_median_rel_err"] == pytest.approx(expected)
     assert 0.0 <= cv["f60_n"]["coverage95"] <= 1.0
