@@ -1,19 +1,34 @@
 """Identify the coating of LS-DYNA ``*MAT_SEATBELT_2D`` webbing from bending tests.
 
 The public Python API; every CLI command of ``surrogate`` is a function here
-of the same name.
+of the same name. Heavy parts (scikit-learn, pandas, Optuna) load on first use.
 """
 
-from ._doe import make_design, paper_stage1_design
+from importlib import import_module
+from typing import Any
+
 from ._errors import InputDataError, SolverError, SurrogateError
 from ._rig import Rig
-from ._samples import SampleSet
 from ._simulate import BendingCurve, simulate
-from ._space import PAPER_SPACE, ParameterSpace, ParameterSpec
-from ._study import StudySpec, load_study
-from ._surrogate_commands import DoeResult, FitResult, PredictResult, doe, fit, predict
-from .gp import CoatingSurrogate
 from .physics import CurveFeatures, curve_features
+
+_LAZY = {
+    "PAPER_SPACE": "._space",
+    "ParameterSpace": "._space",
+    "ParameterSpec": "._space",
+    "make_design": "._doe",
+    "paper_stage1_design": "._doe",
+    "SampleSet": "._samples",
+    "StudySpec": "._study",
+    "load_study": "._study",
+    "DoeResult": "._surrogate_commands",
+    "FitResult": "._surrogate_commands",
+    "PredictResult": "._surrogate_commands",
+    "doe": "._surrogate_commands",
+    "fit": "._surrogate_commands",
+    "predict": "._surrogate_commands",
+    "CoatingSurrogate": ".gp",
+}
 
 __all__ = [
     "PAPER_SPACE",
@@ -42,3 +57,15 @@ __all__ = [
 ]
 
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        value = getattr(import_module(_LAZY[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'surrogate' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

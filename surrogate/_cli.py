@@ -12,13 +12,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from ._doe import DESIGNS
 from ._errors import InputDataError, SolverError
 from ._io import atomic_write_text
 from ._rig import Rig
 from ._simulate import BendingCurve, simulate
-from ._surrogate_commands import doe, fit, predict
-from .gp import cross_validation_table
+from ._space import DESIGNS
 
 __all__ = ["main"]
 
@@ -114,6 +112,8 @@ def _build_parser() -> argparse.ArgumentParser:
 
 
 def _doe(args: argparse.Namespace) -> int:
+    from ._surrogate_commands import doe
+
     result = doe(
         args.design,
         n=args.n,
@@ -138,6 +138,9 @@ def _doe(args: argparse.Namespace) -> int:
 
 
 def _fit(args: argparse.Namespace) -> int:
+    from ._surrogate_commands import fit
+    from .gp import cross_validation_table
+
     result = fit(args.samples, out=args.out, seed=args.seed)
     if args.json:
         _print_json(result.to_json())
@@ -151,6 +154,8 @@ def _fit(args: argparse.Namespace) -> int:
 
 
 def _predict(args: argparse.Namespace) -> int:
+    from ._surrogate_commands import predict
+
     result = predict(args.model, args.points, out=args.out)
     if args.json:
         _print_json(result.to_json())

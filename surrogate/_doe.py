@@ -10,11 +10,10 @@ import pandas as pd
 from scipy.stats import qmc
 
 from ._errors import InputDataError
-from ._space import COATING_PARAMETERS, PAPER_SPACE, ParameterSpace
+from ._space import COATING_PARAMETERS, DESIGNS, PAPER_SPACE, ParameterSpace
 
 __all__ = ["DESIGNS", "PAPER_STAGE1_LEVELS", "make_design", "paper_stage1_design"]
 
-DESIGNS = ("factorial", "lhs", "sobol", "paper")
 MAX_POINTS = 100_000
 
 PAPER_STAGE1_LEVELS = {

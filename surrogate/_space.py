@@ -14,9 +14,17 @@ import numpy as np
 from ._errors import InputDataError
 from ._validate import check_finite
 
-__all__ = ["COATING_PARAMETERS", "PAPER_SPACE", "ParameterSpace", "ParameterSpec"]
+__all__ = [
+    "COATING_PARAMETERS",
+    "DESIGNS",
+    "PAPER_SPACE",
+    "ParameterSpace",
+    "ParameterSpec",
+]
 
 COATING_PARAMETERS = ("ecoat_gpa", "scoat_gpa", "tcoat_mm")
+DESIGNS = ("factorial", "lhs", "sobol", "paper")
+"""Designs of experiments offered (see ``_doe.make_design``)."""
 
 
 @dataclass(frozen=True)
