@@ -108,7 +108,57 @@ def _build_parser() -> argparse.ArgumentParser:
     prediction.add_argument("--out", type=Path, help="CSV to write (points + predictions)")
     prediction.add_argument("--json", action="store_true", help="print one JSON object")
     prediction.set_defaults(handler=_predict)
+
+    running = commands.add_parser(
+        "run", help="the main job: find the coating that meets the study's target"
+    )
+    running.add_argument("study", type=Path, help="study file (studies/*.toml)")
+    running.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
+    running.add_argument("--seed", type=int, help="override [study] seed")
+    running.add_argument("--target", type=_target, help="override the target: f60_n=VALUE")
+    running.add_argument("--budget", type=int, help="override [budget] max_solver_calls")
+    running.add_argument("--json", action="store_true", help="print one JSON object")
+    running.set_defaults(handler=_run)
     return parser
+
+
+def _target(text: str) -> float:
+    name, _, value = text.partition("=")
+    if name != "f60_n" or not value:
+        raise argparse.ArgumentTypeError(f"expected f60_n=VALUE, got {text!r}")
+    try:
+        return float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"f60_n must be a number, got {value!r}") from None
+
+
+def _run(args: argparse.Namespace) -> int:
+    from ._run import run
+
+    result = run(
+        args.study,
+        storage=args.storage,
+        seed=args.seed,
+        target=args.target,
+        budget=args.budget,
+        progress=not args.json,
+    )
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(result.message)
+    if result.verified is not None:
+        v = result.verified
+        label = "verified optimum" if result.status == "verified" else "best verified point"
+        print(
+            f"{label}: Ecoat {v['ecoat_gpa']:.4g} GPa, Scoat {v['scoat_gpa']:.4g} GPa, "
+            f"Tcoat {v['tcoat_mm']:.4g} mm -> F60 {v['f60_n']:.4g} N, "
+            f"theta_sat {v['theta_sat_deg']:g} deg"
+        )
+    if result.identifiability:
+        print(result.identifiability["statement"])
+    print(f"study {result.study!r} in {result.storage}")
+    return 0
 
 
 def _doe(args: argparse.Namespace) -> int:

@@ -1,0 +1,133 @@
+"""What the data determine: the identifiable combination and the equally good set.
+
+A single F60 fixes roughly one combination of the three coating parameters.
+Locally ``F60 ∝ Π p_k^{a_k}`` with ``a_k = ∂ log F60 / ∂ log p_k`` (from the
+surrogate's mean at the chosen point): the combination ``Π p_k^{a_k}`` is
+determined, the directions that leave it unchanged are not. The set of equally
+good points (verified or predicted within tolerance, feasible) shows how wide
+that freedom is; the preferences pick one point from it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+__all__ = ["Identifiability", "assess_identifiability"]
+
+_SHOWN_EXPONENT = 0.05
+_LABELS = {"ecoat_gpa": "Ecoat", "scoat_gpa": "Scoat", "tcoat_mm": "Tcoat"}
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """The identifiability statement of a result (fields are its JSON keys)."""
+
+    exponents: dict[str, float]
+    combination: str
+    combination_value: float
+    relative_uncertainty: float
+    n_equally_good: int
+    ranges: dict[str, list[float]]
+    chosen_by: list[str]
+    statement: str
+
+    def to_json(self) -> dict[str, object]:
+        return asdict(self)
+
+
+def assess_identifiability(
+    names: Sequence[str],
+    chosen: np.ndarray,
+    log_f60: Callable[[np.ndarray], np.ndarray],
+    equally_good: np.ndarray,
+    *,
+    tolerance: float,
+    preference_order: Sequence[str],
+    target_n: float,
+) -> Identifiability:
+    """Assess what a scalar F60 target determines around ``chosen``.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Parameter names, in column order.
+    chosen : ndarray, shape (d,)
+        The chosen (verified) point.
+    log_f60 : callable
+        Surrogate mean of log F60 at points ``(n, d)``.
+    equally_good : ndarray, shape (m, d)
+        Feasible points whose F60 is within tolerance (verified or predicted).
+    """
+    log_chosen = np.log(np.asarray(chosen, dtype=float))
+    step = 1e-3
+    gradient = np.empty(len(names))
+    for k in range(len(names)):
+        up, down = log_chosen.copy(), log_chosen.copy()
+        up[k] += step
+        down[k] -= step
+        values = log_f60(np.exp(np.vstack([up, down])))
+        gradient[k] = (values[0] - values[1]) / (2 * step)
+    scale = float(np.max(np.abs(gradient))) or 1.0
+    exponents = gradient / scale
+    shown = [k for k in np.argsort(-np.abs(exponents)) if abs(exponents[k]) >= _SHOWN_EXPONENT]
+    combination = " · ".join(f"{_LABELS.get(names[k], names[k])}^{exponents[k]:.2f}" for k in shown)
+    value = float(np.exp(exponents @ log_chosen))
+    points = np.atleast_2d(equally_good) if len(equally_good) else log_chosen[None, :1] * 0
+    if len(equally_good):
+        combos = np.log(np.atleast_2d(equally_good)) @ exponents
+        spread = float(np.exp((combos.max() - combos.min()) / 2.0) - 1.0)
+        ranges = {
+            n: [float(points[:, k].min()), float(points[:, k].max())] for k, n in enumerate(names)
+        }
+    else:
+        spread = float("nan")
+        ranges = {n: [float(chosen[k]), float(chosen[k])] for k, n in enumerate(names)}
+    # F60 within ±tolerance fixes the combination to ±tolerance / max|a|.
+    uncertainty = max(spread, tolerance / scale) if np.isfinite(spread) else tolerance / scale
+    statement = _statement(
+        names,
+        exponents,
+        combination,
+        uncertainty,
+        len(equally_good),
+        ranges,
+        preference_order,
+        target_n,
+    )
+    return Identifiability(
+        exponents={n: float(e) for n, e in zip(names, exponents, strict=True)},
+        combination=combination,
+        combination_value=value,
+        relative_uncertainty=float(uncertainty),
+        n_equally_good=len(equally_good),
+        ranges=ranges,
+        chosen_by=list(preference_order),
+        statement=statement,
+    )
+
+
+def _meaning(names: Sequence[str], exponents: np.ndarray) -> str:
+    index = {n: k for k, n in enumerate(names)}
+    if not all(n in index for n in _LABELS):
+        return ""
+    e, s, t = (abs(exponents[index[n]]) for n in ("ecoat_gpa", "scoat_gpa", "tcoat_mm"))
+    if e > 0.7 and t > 0.7 and s < 0.3:
+        return " (≈ the bending stiffness, D ∝ Ecoat·Tcoat)"
+    if s > 0.7 and t > 0.7 and e < 0.3:
+        return " (≈ the plastic moment, Mp ∝ Scoat·Tcoat)"
+    return ""
+
+
+def _statement(names, exponents, combination, uncertainty, n_good, ranges, order, target_n) -> str:
+    span = ", ".join(f"{_LABELS.get(n, n)} {lo:.3g}–{hi:.3g}" for n, (lo, hi) in ranges.items())
+    prefer = ", then ".join(f"lower {_LABELS.get(n, n)}" for n in order) or "none"
+    return (
+        f"F60 = {target_n:.4g} N determines one combination, {combination}"
+        f"{_meaning(names, exponents)}, to ±{100 * uncertainty:.1f} %; the other "
+        f"directions are free: {n_good} equally good points span {span}. "
+        f"The preferences ({prefer}) ranked the candidates; the result is the most "
+        "preferred verified point that meets the target."
+    )
