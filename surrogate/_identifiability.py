@@ -26,9 +26,11 @@ class Identifiability:
     """The identifiability statement of a result (fields are its JSON keys)."""
 
     exponents: dict[str, float]
+    exponents_from: str
     combination: str
     combination_value: float
     relative_uncertainty: float
+    set_spread: float
     n_equally_good: int
     ranges: dict[str, list[float]]
     chosen_by: list[str]
@@ -47,6 +49,7 @@ def assess_identifiability(
     tolerance: float,
     preference_order: Sequence[str],
     target_n: float,
+    solver_gradient: np.ndarray | None = None,
 ) -> Identifiability:
     """Assess what a scalar F60 target determines around ``chosen``.
 
@@ -60,18 +63,27 @@ def assess_identifiability(
         Surrogate mean of log F60 at points ``(n, d)``.
     equally_good : ndarray, shape (m, d)
         Feasible points whose F60 is within tolerance (verified or predicted).
+    solver_gradient : ndarray, shape (d,), optional
+        ``∂ log F60 / ∂ log p`` from full-solver runs at ``chosen``; preferred
+        to the surrogate's, which is noisy when the surrogate has few points.
     """
     log_chosen = np.log(np.asarray(chosen, dtype=float))
-    step = 1e-3
-    gradient = np.empty(len(names))
-    for k in range(len(names)):
-        up, down = log_chosen.copy(), log_chosen.copy()
-        up[k] += step
-        down[k] -= step
-        values = log_f60(np.exp(np.vstack([up, down])))
-        gradient[k] = (values[0] - values[1]) / (2 * step)
-    scale = float(np.max(np.abs(gradient))) or 1.0
-    exponents = gradient / scale
+    sites = (
+        np.vstack([log_chosen, np.log(np.atleast_2d(equally_good))])
+        if len(equally_good)
+        else log_chosen[None, :]
+    )
+    if solver_gradient is not None:
+        mean = np.asarray(solver_gradient, dtype=float)
+        scale = float(np.max(np.abs(mean))) or 1.0
+    else:
+        # Average the surrogate's local exponents over the equally good set:
+        # one point's gradient of a sparse surrogate is noisy, the set's mean less so.
+        gradients = _log_gradients(log_f60, sites)
+        scales = np.max(np.abs(gradients), axis=1, keepdims=True)
+        mean = np.mean(gradients / np.where(scales > 0, scales, 1.0), axis=0)
+        scale = float(np.median(scales))
+    exponents = mean / (float(np.max(np.abs(mean))) or 1.0)
     shown = [k for k in np.argsort(-np.abs(exponents)) if abs(exponents[k]) >= _SHOWN_EXPONENT]
     combination = " · ".join(f"{_LABELS.get(names[k], names[k])}^{exponents[k]:.2f}" for k in shown)
     value = float(np.exp(exponents @ log_chosen))
@@ -85,28 +97,41 @@ def assess_identifiability(
     else:
         spread = float("nan")
         ranges = {n: [float(chosen[k]), float(chosen[k])] for k, n in enumerate(names)}
-    # F60 within ±tolerance fixes the combination to ±tolerance / max|a|.
-    uncertainty = max(spread, tolerance / scale) if np.isfinite(spread) else tolerance / scale
-    statement = _statement(
-        names,
-        exponents,
-        combination,
-        uncertainty,
-        len(equally_good),
-        ranges,
-        preference_order,
-        target_n,
+    # F60 within ±tolerance fixes the combination to ±tolerance / max|a|; the
+    # predicted equally good set also shows the surrogate's own scatter.
+    uncertainty = tolerance / scale
+    source = "full-solver runs at the result" if solver_gradient is not None else "the surrogate"
+    statement = (
+        f"F60 = {target_n:.4g} N ± {100 * tolerance:g} % determines one combination, "
+        f"{combination}{_meaning(names, exponents)}, to ±{100 * uncertainty:.1f} % "
+        f"(exponents from {source}). The other directions are free: "
+        f"{_span(len(equally_good), ranges, spread)}. "
+        f"The preferences ({_preferences(preference_order)}) ranked the candidates; the "
+        "result is the most preferred verified point that meets the target."
     )
     return Identifiability(
         exponents={n: float(e) for n, e in zip(names, exponents, strict=True)},
+        exponents_from="full solver" if solver_gradient is not None else "surrogate",
         combination=combination,
         combination_value=value,
         relative_uncertainty=float(uncertainty),
+        set_spread=float(spread),
         n_equally_good=len(equally_good),
         ranges=ranges,
         chosen_by=list(preference_order),
         statement=statement,
     )
+
+
+def _log_gradients(
+    log_f60: Callable[[np.ndarray], np.ndarray], sites: np.ndarray, step: float = 1e-3
+) -> np.ndarray:
+    """Central differences of log F60 in log parameters at every site, (m, d)."""
+    m, d = sites.shape
+    shifts = np.vstack([np.eye(d) * step, -np.eye(d) * step])  # (2d, d)
+    values = log_f60(np.exp((sites[:, None, :] + shifts[None, :, :]).reshape(-1, d)))
+    values = values.reshape(m, 2 * d)
+    return (values[:, :d] - values[:, d:]) / (2 * step)
 
 
 def _meaning(names: Sequence[str], exponents: np.ndarray) -> str:
@@ -121,13 +146,15 @@ def _meaning(names: Sequence[str], exponents: np.ndarray) -> str:
     return ""
 
 
-def _statement(names, exponents, combination, uncertainty, n_good, ranges, order, target_n) -> str:
+def _span(n_good: int, ranges: dict[str, list[float]], spread: float) -> str:
+    if n_good == 0:
+        return "no other equally good point was found"
     span = ", ".join(f"{_LABELS.get(n, n)} {lo:.3g}–{hi:.3g}" for n, (lo, hi) in ranges.items())
-    prefer = ", then ".join(f"lower {_LABELS.get(n, n)}" for n in order) or "none"
     return (
-        f"F60 = {target_n:.4g} N determines one combination, {combination}"
-        f"{_meaning(names, exponents)}, to ±{100 * uncertainty:.1f} %; the other "
-        f"directions are free: {n_good} equally good points span {span}. "
-        f"The preferences ({prefer}) ranked the candidates; the result is the most "
-        "preferred verified point that meets the target."
+        f"{n_good} equally good points (verified or predicted) span {span}, the "
+        f"combination scattering ±{100 * spread:.0f} % over them"
     )
+
+
+def _preferences(order: Sequence[str]) -> str:
+    return ", then ".join(f"lower {_LABELS.get(n, n)}" for n in order) or "none"

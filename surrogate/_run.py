@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import optuna
 import pandas as pd
+from scipy.stats import norm
 
 from ._batch import solve_inputs, solver_inputs
 from ._cache import ResultCache, input_hash
@@ -29,7 +30,7 @@ from ._errors import InputDataError
 from ._identifiability import assess_identifiability
 from ._objective import constraint_values, is_feasible, meets_target, relative_misfit
 from ._samples import SampleSet
-from ._study import Budget, StudySpec, Targets, load_study
+from ._study import StudySpec, Targets, load_study
 from ._surrogate_commands import fit_surrogate
 
 __all__ = ["RunResult", "run", "verify_study_name"]
@@ -45,10 +46,14 @@ class RunResult:
 
     ``verified`` is the chosen verified point (when ``status`` is
     ``budget_exhausted``: the best verified point, which misses the target).
+    ``solver_calls`` counts every full-solver run of the study, the
+    identifiability runs after verification included; ``calls_to_verify``
+    the runs until a verified point met the target.
     """
 
     status: str
     solver_calls: int
+    calls_to_verify: int | None
     verified: dict[str, float] | None
     study: str
     storage: str
@@ -72,8 +77,7 @@ def _target_of(spec: StudySpec) -> float:
 
 def _distributions(spec: StudySpec) -> dict[str, optuna.distributions.BaseDistribution]:
     return {
-        p.name: optuna.distributions.FloatDistribution(p.low, p.high, log=p.log)
-        for p in spec.space
+        p.name: optuna.distributions.FloatDistribution(p.low, p.high, log=p.log) for p in spec.space
     }
 
 
@@ -145,12 +149,7 @@ def _with_overrides(
             )
         spec = dataclasses.replace(
             spec,
-            budget=Budget(
-                spec.budget.initial_samples,
-                budget,
-                spec.budget.candidates_per_iteration,
-                spec.budget.surrogate_trials,
-            ),
+            budget=dataclasses.replace(spec.budget, max_solver_calls=budget),
         )
     if spec.targets.f60_n is None:
         raise InputDataError(
@@ -179,6 +178,7 @@ def _open_study(spec: StudySpec, storage_url: str) -> optuna.Study:
     attrs = {
         "description": "full-solver verification runs of a coating identification "
         "(surrogate run); value = |F60/target - 1|, constraints <= 0 feasible",
+        "objective": f"{METRIC} = |F60 / target - 1|",
         "target_f60_n": target,
         "tolerance": spec.targets.tolerance,
         "constraints": [
@@ -278,6 +278,35 @@ class _Verifier:
             "angle_deg": result["angle_deg"],
             "force_n": result["force_n"],
         }
+
+    def sensitivities(self, point: dict[str, Any]) -> np.ndarray | None:
+        """``∂ log F60 / ∂ log p`` at a verified point, by forward differences of
+        the full solver (one run per parameter, +5 % each); None if the budget
+        allows none (``[budget] identifiability_runs``)."""
+        if self.spec.budget.identifiability_runs < len(self.names):
+            return None
+        step = np.log(1.05)
+        gradient = np.empty(len(self.names))
+        for k, name in enumerate(self.names):
+            spec = self.spec.space[name]
+            direction = 1.0 if point["params"][name] * 1.05 <= spec.high else -1.0
+            shifted = {**point["params"], name: point["params"][name] * np.exp(direction * step)}
+            record = self._solve(shifted, phase="identifiability")
+            if record["status"] != "ok":
+                return None
+            gradient[k] = direction * np.log(record["f60_n"] / point["f60_n"]) / step
+        return gradient
+
+    def _solve(self, params: dict[str, float], *, phase: str) -> dict[str, Any]:
+        inputs = solver_inputs(params, self.spec.rig, solver=self.spec.solver)
+        key = input_hash(inputs)
+        if key not in self.records:
+            result = self.cache.get(key)
+            if result is None:
+                result = solve_inputs(inputs)
+                self.cache.put(key, inputs, result)
+            self.records[key] = self._tell(params, key, result, phase)
+        return self.records[key]
 
     def meeting(self) -> list[dict[str, Any]]:
         tolerance = self.spec.targets.tolerance
@@ -411,10 +440,25 @@ def _search(model: Any, spec: StudySpec, iteration: int) -> pd.DataFrame:
                     **params,
                     "misfit": misfit,
                     "feasible": is_feasible(constraints),
-                    "f60_std_rel": pred["log_f60_std"][i],
+                    "p_meet": _probability_of_meeting(pred, i, spec),
                 }
             )
     return pd.DataFrame(rows)
+
+
+def _probability_of_meeting(pred: dict[str, np.ndarray], i: int, spec: StudySpec) -> float:
+    """P(F60 within tolerance and θsat ≥ θmin) under the surrogate's predictive law."""
+    half_width = np.log1p(spec.targets.tolerance)
+    offset = np.log(pred["f60_n"][i] / _target_of(spec))
+    sd = max(float(pred["log_f60_std"][i]), 1e-12)
+    p_f60 = norm.cdf((half_width - offset) / sd) - norm.cdf((-half_width - offset) / sd)
+    theta_min = spec.constraints.theta_sat_deg_min
+    if theta_min is None:
+        return float(p_f60)
+    theta_sd = max(float(pred["theta_sat_deg_std"][i]), 1e-12)
+    # θsat lives on a 1° grid: half a degree below θmin still rounds to meeting it
+    p_theta = norm.sf((theta_min - 0.5 - pred["theta_sat_deg"][i]) / theta_sd)
+    return float(p_f60 * p_theta)
 
 
 def _preference_score(params: dict[str, float], spec: StudySpec) -> float:
@@ -428,30 +472,32 @@ def _preference_score(params: dict[str, float], spec: StudySpec) -> float:
 def _propose(
     model: Any, spec: StudySpec, verified: np.ndarray, iteration: int, *, n: int
 ) -> np.ndarray:
-    """Promising, diverse candidates: the preferred point predicted within
-    tolerance, then the good points farthest from everything run so far."""
+    """Promising, diverse candidates.
+
+    First the most preferred point among those most likely to meet the target
+    (probability within 80 % of the best found), then the good points farthest
+    from everything run so far.
+    """
     trials = _search(model, spec, iteration)
     names = list(spec.space.names)
-    tolerance = spec.targets.tolerance
-    good = trials[trials.feasible & (trials.misfit <= 0.5 * tolerance)]
-    if good.empty:
-        feasible = trials[trials.feasible]
-        pool = feasible if not feasible.empty else trials
-        good = pool.nsmallest(max(5, n), "misfit")
     unit_verified = spec.space.to_unit(verified) if len(verified) else np.empty((0, len(names)))
-    unit_good = spec.space.to_unit(good[names].to_numpy())
-    order = np.lexsort([good[name].to_numpy() for name in reversed(spec.preference_order)])
-    chosen: list[int] = []
-    for index in order:  # the preferred point not yet run
-        if _min_distance(unit_good[index], unit_verified) > 1e-3:
-            chosen.append(int(index))
-            break
-    while len(chosen) < n and len(chosen) < len(good):
-        taken = np.vstack([unit_verified, unit_good[chosen]]) if chosen else unit_verified
-        distances = np.array([_min_distance(u, taken) for u in unit_good])
+    unit_all = spec.space.to_unit(trials[names].to_numpy())
+    fresh = np.array([_min_distance(u, unit_verified) > 1e-3 for u in unit_all])
+    trials, unit_all = trials[fresh].reset_index(drop=True), unit_all[fresh]
+    if trials.empty:
+        return np.empty((0, len(names)))
+    pool = np.flatnonzero(trials.p_meet.to_numpy() >= 0.8 * trials.p_meet.max())
+    keys = [trials[name].to_numpy()[pool] for name in reversed(spec.preference_order)]
+    chosen = [int(pool[np.lexsort(keys)[0]])]
+    good = (trials.feasible & (trials.misfit <= 0.5 * spec.targets.tolerance)).to_numpy()
+    while len(chosen) < n and good.sum() > len(chosen):
+        taken = np.vstack([unit_verified, unit_all[chosen]])
+        distances = np.array(
+            [_min_distance(u, taken) if g else -1.0 for u, g in zip(unit_all, good, strict=True)]
+        )
         distances[chosen] = -1.0
         chosen.append(int(np.argmax(distances)))
-    return good[names].to_numpy()[chosen]
+    return trials[names].to_numpy()[chosen]
 
 
 def _min_distance(point: np.ndarray, others: np.ndarray) -> float:
@@ -466,6 +512,7 @@ def _result(
 ) -> RunResult:
     chosen = verifier.chosen()
     status = "verified" if chosen is not None else "budget_exhausted"
+    calls_to_verify = verifier.calls if chosen is not None else None
     point = chosen or verifier.best()
     verified = None
     identifiability: dict[str, Any] = {}
@@ -487,11 +534,13 @@ def _result(
                 "so the data determine nothing yet."
             }
         else:
-            identifiability = _assess(spec, names, point, model, good)
-    message = _message(spec, status, verifier, point)
+            gradient = verifier.sensitivities(point) if chosen is not None else None
+            identifiability = _assess(spec, names, point, model, good, gradient)
+    message = _message(spec, status, verifier, point, calls_to_verify)
     result = RunResult(
         status,
         verifier.calls,
+        calls_to_verify,
         verified,
         verify_study_name(spec),
         storage_url,
@@ -511,7 +560,12 @@ def _result(
 
 
 def _assess(
-    spec: StudySpec, names: list[str], point: dict[str, Any], model: Any, good: np.ndarray
+    spec: StudySpec,
+    names: list[str],
+    point: dict[str, Any],
+    model: Any,
+    good: np.ndarray,
+    gradient: np.ndarray | None,
 ) -> dict[str, Any]:
     assessment = assess_identifiability(
         names,
@@ -521,6 +575,7 @@ def _assess(
         tolerance=spec.targets.tolerance,
         preference_order=spec.preference_order,
         target_n=_target_of(spec),
+        solver_gradient=gradient,
     )
     return assessment.to_json()
 
@@ -553,14 +608,18 @@ def _equally_good(model: Any, spec: StudySpec, verifier: _Verifier, iterations: 
 
 
 def _message(
-    spec: StudySpec, status: str, verifier: _Verifier, point: dict[str, Any] | None
+    spec: StudySpec,
+    status: str,
+    verifier: _Verifier,
+    point: dict[str, Any] | None,
+    calls_to_verify: int | None,
 ) -> str:
     target, tolerance = _target_of(spec), spec.targets.tolerance
     if status == "verified" and point is not None:
         return (
             f"verified: F60 = {point['f60_n']:.4g} N is within {100 * tolerance:g} % of "
             f"the target {target:.4g} N and every constraint holds, after "
-            f"{verifier.calls} full-solver runs"
+            f"{calls_to_verify} full-solver runs"
         )
     if point is None:
         return (

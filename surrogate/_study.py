@@ -54,10 +54,16 @@ class Constraints:
 
 @dataclass(frozen=True)
 class Budget:
-    initial_samples: int = 8
+    """Full-solver runs: the initial design, the cap on the search, candidates per
+    iteration, cheap surrogate trials per iteration, and the runs spent after
+    verification on the exact sensitivities (on top of the cap; 0: use the
+    surrogate's)."""
+
+    initial_samples: int = 5
     max_solver_calls: int = 30
-    candidates_per_iteration: int = 2
+    candidates_per_iteration: int = 1
     surrogate_trials: int = 300
+    identifiability_runs: int = 3
 
 
 @dataclass(frozen=True)
@@ -303,7 +309,13 @@ def _constraints(section: dict[str, Any], where: str) -> Constraints:
 def _budget(section: dict[str, Any], where: str) -> Budget:
     _only(
         section,
-        ("initial_samples", "max_solver_calls", "candidates_per_iteration", "surrogate_trials"),
+        (
+            "initial_samples",
+            "max_solver_calls",
+            "candidates_per_iteration",
+            "surrogate_trials",
+            "identifiability_runs",
+        ),
         where,
         "budget",
     )
@@ -337,4 +349,10 @@ def _budget(section: dict[str, Any], where: str) -> Budget:
         "budget.surrogate_trials",
         low=10,
     )
-    return Budget(initial, calls, per, trials)
+    identifiability = _int(
+        section.get("identifiability_runs", default.identifiability_runs),
+        where,
+        "budget.identifiability_runs",
+        low=0,
+    )
+    return Budget(initial, calls, per, trials, identifiability)
