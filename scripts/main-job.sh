@@ -3,4 +3,4 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-exec .venv/bin/surrogate simulate --ecoat 1.0 --scoat 0.2 --tcoat 0.012 "$@"
+exec .venv/bin/surrogate run studies/paper_coating.toml "$@"

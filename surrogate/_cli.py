@@ -119,7 +119,23 @@ def _build_parser() -> argparse.ArgumentParser:
     running.add_argument("--budget", type=int, help="override [budget] max_solver_calls")
     running.add_argument("--json", action="store_true", help="print one JSON object")
     running.set_defaults(handler=_run)
+
+    board = commands.add_parser("dashboard", help="optuna-dashboard of a study, on 127.0.0.1")
+    board.add_argument("study", type=Path, help="study file")
+    board.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
+    board.add_argument("--port", type=int, default=8080, help="port on 127.0.0.1 (default 8080)")
+    board.set_defaults(handler=_dashboard)
     return parser
+
+
+def _dashboard(args: argparse.Namespace) -> int:
+    from ._serve import dashboard
+
+    try:
+        dashboard(args.study, storage=args.storage, port=args.port)
+    except KeyboardInterrupt:
+        pass
+    return 0
 
 
 def _target(text: str) -> float:

@@ -1,0 +1,32 @@
+"""``dashboard``: optuna-dashboard on a study's storage, on 127.0.0.1 only."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ._errors import InputDataError
+from ._study import StudySpec, load_study
+
+__all__ = ["dashboard"]
+
+HOST = "127.0.0.1"  # never 0.0.0.0: reach it from elsewhere through an SSH tunnel
+
+
+def dashboard(
+    study: str | Path | StudySpec, *, storage: str | None = None, port: int = 8080
+) -> None:
+    """Serve optuna-dashboard for the study's storage until interrupted."""
+    spec = study if isinstance(study, StudySpec) else load_study(study)
+    if not 1024 <= port <= 65535:
+        raise InputDataError(f"--port must be in [1024, 65535], got {port}")
+    url = storage or spec.default_storage()
+    if url.startswith("sqlite:///") and not Path(url.removeprefix("sqlite:///")).exists():
+        raise InputDataError(f"no storage at {url} yet; run `surrogate run {spec.path}` first")
+    try:
+        from optuna_dashboard import run_server
+    except ImportError:
+        raise InputDataError(
+            "optuna-dashboard is not installed; pip install 'webbing-surrogate[dashboard]'"
+        ) from None
+    print(f"optuna-dashboard for {url} on http://{HOST}:{port}/ (Ctrl-C to stop)", flush=True)
+    run_server(url, host=HOST, port=port)
