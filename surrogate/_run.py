@@ -125,7 +125,8 @@ def run(
         if len(candidates) == 0:
             break
         verifier.verify(candidates, phase=f"iteration {iteration}")
-    return _result(spec, verifier, storage_url, iteration, last_model)
+    calls_to_verify = verifier.calls if verifier.chosen() is not None else None
+    return _result(spec, verifier, storage_url, iteration, calls_to_verify)
 
 
 # -- the verify study ------------------------------------------------------------------------
@@ -508,11 +509,14 @@ def _min_distance(point: np.ndarray, others: np.ndarray) -> float:
 
 # -- the result ------------------------------------------------------------------------------
 def _result(
-    spec: StudySpec, verifier: _Verifier, storage_url: str, iterations: int, model: Any
+    spec: StudySpec,
+    verifier: _Verifier,
+    storage_url: str,
+    iterations: int,
+    calls_to_verify: int | None,
 ) -> RunResult:
     chosen = verifier.chosen()
     status = "verified" if chosen is not None else "budget_exhausted"
-    calls_to_verify = verifier.calls if chosen is not None else None
     point = chosen or verifier.best()
     verified = None
     identifiability: dict[str, Any] = {}

@@ -31,9 +31,12 @@ def test_dashboard_serves_the_verify_study_with_our_figure_and_note(tmp_path):
     shutil.copy(STUDIES / "paper_coating.toml", study)
     result = run(study, progress=False, budget=8)
     port = _free_port()
-    server = subprocess.Popen([sys.executable, "-m", "surrogate", "dashboard", str(study),
-                               "--port", str(port)], stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True)
+    server = subprocess.Popen(
+        [sys.executable, "-m", "surrogate", "dashboard", str(study), "--port", str(port)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         summaries = None
         for _ in range(60):
@@ -45,8 +48,9 @@ def test_dashboard_serves_the_verify_study_with_our_figure_and_note(tmp_path):
                 time.sleep(0.25)
         assert summaries, "the dashboard did not answer on 127.0.0.1"
         study_id = next(s["study_id"] for s in summaries if s["study_name"] == result.study)
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/studies/{study_id}?after=0",
-                                    timeout=5) as response:
+        with urllib.request.urlopen(
+            f"http://127.0.0.1:{port}/api/studies/{study_id}?after=0", timeout=5
+        ) as response:
             detail = json.load(response)
         assert len(detail["trials"]) == result.solver_calls
         assert [g["id"] for g in detail["plotly_graph_objects"]] == ["verified-curves"]
@@ -63,7 +67,11 @@ def test_dashboard_serves_the_verify_study_with_our_figure_and_note(tmp_path):
 def test_dashboard_without_a_storage_yet_is_refused(tmp_path):
     study = tmp_path / "paper_coating.toml"
     shutil.copy(STUDIES / "paper_coating.toml", study)
-    completed = subprocess.run([sys.executable, "-m", "surrogate", "dashboard", str(study)],
-                               capture_output=True, text=True, timeout=60)
+    completed = subprocess.run(
+        [sys.executable, "-m", "surrogate", "dashboard", str(study)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert completed.returncode == 2
     assert "run `surrogate run" in completed.stderr and len(completed.stderr.splitlines()) == 1
