@@ -83,6 +83,12 @@ def _build_parser() -> argparse.ArgumentParser:
     design.add_argument("--n", type=int, default=16, help="points (levels for factorial)")
     design.add_argument("--seed", type=int, default=None, help="seed (default: the study's, or 0)")
     design.add_argument("--study", type=Path, help="take ranges and rig from this study file")
+    design.add_argument(
+        "--from",
+        dest="points_file",
+        type=Path,
+        help="take the points from this CSV instead (parameter columns)",
+    )
     design.add_argument("--run", action="store_true", help="run the full solver on the design")
     design.add_argument("--jobs", type=int, default=1, help="worker processes for --run")
     design.add_argument(
@@ -189,6 +195,7 @@ def _doe(args: argparse.Namespace) -> int:
         jobs=args.jobs,
         out=args.out,
         cache_dir=args.cache,
+        points_file=args.points_file,
         progress=not args.json and sys.stderr.isatty(),
     )
     if args.json:

@@ -82,12 +82,15 @@ def doe(
     out: str | Path,
     cache_dir: str | Path | None = None,
     progress: bool = True,
+    points_file: str | Path | None = None,
 ) -> DoeResult:
     """Make a design (ranges from ``study`` or the paper's) and optionally run it.
 
     Without ``run`` the design points are written to ``out``; with ``run`` the
     full solver evaluates them and ``out`` is a sample set (plus curves and a
     JSON sidecar). Cache: ``cache_dir`` or ``.solver-cache/`` next to ``out``.
+    ``points_file``: take the points from this CSV (a design of one's own, with
+    the parameter columns) instead of generating them; ``design`` is then ``file``.
     """
     spec = _study_or_none(study)
     space = spec.space if spec is not None else PAPER_SPACE
@@ -96,7 +99,18 @@ def doe(
     out = Path(out)
     if not out.parent.exists():
         raise InputDataError(f"output folder {out.parent} does not exist; create it first")
-    points = make_design(design, space, n=n, seed=seed)
+    if points_file is not None:
+        design = "file"
+        points = read_points(points_file, space.names)
+        outside = [n for n in space.names if not np.all(space[n].contains(points[n]))]
+        if outside:
+            raise InputDataError(
+                f"{points_file}: column {outside[0]} has values outside "
+                f"[{space[outside[0]].low:g}, {space[outside[0]].high:g}]; "
+                "fix them or widen the study's range"
+            )
+    else:
+        points = make_design(design, space, n=n, seed=seed)
     if not run:
         buffer = io.StringIO()
         points.to_csv(buffer, index=False, float_format="%.10g")

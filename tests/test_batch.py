@@ -5,21 +5,8 @@ import pandas as pd
 import pytest
 
 from surrogate import PAPER_SPACE, SampleSet, make_design
-from surrogate._batch import evaluate_design, solve_inputs
-
-
-class Counting:
-    """A solve function that counts calls and can be interrupted."""
-
-    def __init__(self, stop_after=None):
-        self.calls = 0
-        self.stop_after = stop_after
-
-    def __call__(self, inputs):
-        if self.stop_after is not None and self.calls >= self.stop_after:
-            raise KeyboardInterrupt
-        self.calls += 1
-        return solve_inputs(inputs)
+from surrogate._batch import evaluate_design
+from tests.conftest import CountingSolve
 
 
 @pytest.fixture
@@ -28,7 +15,7 @@ def design():
 
 
 def test_cache_never_solves_a_point_twice(tmp_path, design):
-    first, second = Counting(), Counting()
+    first, second = CountingSolve(), CountingSolve()
     a = evaluate_design(design, PAPER_SPACE, cache_dir=tmp_path, progress=False, solve=first)
     b = evaluate_design(design, PAPER_SPACE, cache_dir=tmp_path, progress=False, solve=second)
     assert first.calls == 6 and second.calls == 0
@@ -40,9 +27,13 @@ def test_cache_never_solves_a_point_twice(tmp_path, design):
 def test_interrupted_batch_resumes_where_it_stopped(tmp_path, design):
     with pytest.raises(KeyboardInterrupt):
         evaluate_design(
-            design, PAPER_SPACE, cache_dir=tmp_path, progress=False, solve=Counting(stop_after=4)
+            design,
+            PAPER_SPACE,
+            cache_dir=tmp_path,
+            progress=False,
+            solve=CountingSolve(stop_after=4),
         )
-    resumed = Counting()
+    resumed = CountingSolve()
     samples = evaluate_design(
         design, PAPER_SPACE, cache_dir=tmp_path, progress=False, solve=resumed
     )

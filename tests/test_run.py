@@ -13,6 +13,7 @@ import surrogate
 import surrogate._run as run_module
 from surrogate import InputDataError, load_study
 from surrogate._run import run
+from tests.conftest import CountingSolve
 
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 OPTUNA = str(Path(sys.executable).with_name("optuna"))  # the optuna CLI of this environment
@@ -25,18 +26,6 @@ def study_file(tmp_path):
     path = tmp_path / "studies" / "paper_coating.toml"
     shutil.copy(STUDIES / "paper_coating.toml", path)
     return path
-
-
-class CountingSolve:
-    def __init__(self, stop_after=None):
-        self.calls = 0
-        self.stop_after = stop_after
-
-    def __call__(self, inputs):
-        if self.stop_after is not None and self.calls >= self.stop_after:
-            raise KeyboardInterrupt  # as if the user pressed Ctrl-C mid-run
-        self.calls += 1
-        return surrogate._batch.solve_inputs(inputs)
 
 
 def test_verified_point_resimulated_meets_target_and_constraints(study_file):

@@ -352,6 +352,15 @@ class _Problem:
                 jacobian[:N, N] -= self.mu * np.sign(ev.friction_n) * tangent_j
         return jacobian
 
+    def residual_scales(self) -> tuple[np.ndarray, np.ndarray]:
+        """Weights that make the residual dimensionless (moments by D·b/l, the
+        gap by l) and the convergence tolerance of each scaled entry."""
+        weights = np.full(self.N + 1, 1.0 / self.stiffness_scale)
+        weights[-1] = 1.0 / self.centre[0]
+        tolerance = np.full(self.N + 1, 1e-9)
+        tolerance[-1] = 1e-10
+        return weights, tolerance
+
     def forces(self, ev: _Evaluation) -> tuple[float, float]:
         """Resultant and perpendicular force on the probe [N]."""
         contact = ev.contact
@@ -376,10 +385,7 @@ def _newton(
     search on the scaled residual guards the step: together they stop the
     cycling of plain Newton when a fibre sits at its yield point.
     """
-    weights = np.full(problem.N + 1, 1.0 / problem.stiffness_scale)
-    weights[-1] = 1.0 / problem.centre[0]
-    tolerance = np.full(problem.N + 1, 1e-9)
-    tolerance[-1] = 1e-10
+    weights, tolerance = problem.residual_scales()
     preferred = None
 
     def attempt(psi: np.ndarray, lam: float) -> tuple[_Evaluation, float]:
@@ -442,15 +448,14 @@ def _initial_stiffness(
     (the classic initial-stiffness method) lets that node unload; it converges
     linearly, in a few hundred cheap iterations, so it is kept for this case.
     """
-    weights = np.full(problem.N + 1, 1.0 / problem.stiffness_scale)
-    weights[-1] = 1.0 / problem.centre[0]
+    weights, tolerance = problem.residual_scales()
     ev = problem.evaluate(psi, lam, theta, previous)
     factors = None
     for iteration in range(_MAX_INITIAL_STIFFNESS):
         scaled = np.abs(ev.residual * weights)
         if not np.all(np.isfinite(scaled)):
             return None
-        if np.all(scaled[:-1] < 1e-9) and scaled[-1] < 1e-10:
+        if np.all(scaled < tolerance):
             return ev
         if iteration % _REFACTOR_EVERY == 0:  # the contact geometry drifts slowly
             try:

@@ -153,3 +153,30 @@ def test_bad_design_request_writes_nothing(tmp_path):
         assert result.returncode == 2, (args, result.stderr)
         assert len(result.stderr.strip().splitlines()) == 1
     assert list(tmp_path.iterdir()) == []
+
+
+BAD_DESIGNS = {**BAD_POINTS,
+               "out-of-range": "case_id,ecoat_gpa,scoat_gpa,tcoat_mm\na,9.0,0.2,0.02\n"}
+
+
+@pytest.mark.parametrize("kind", sorted(BAD_DESIGNS))
+def test_bad_design_file_is_refused_and_nothing_written(kind, tmp_path):
+    (tmp_path / "design.csv").write_text(BAD_DESIGNS[kind])
+    before = _snapshot(tmp_path)
+    result = _run("doe", "--from", "design.csv", "--run", "--out", "samples.csv", cwd=tmp_path)
+    assert result.returncode == 2
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert "Traceback" not in result.stderr
+    assert _snapshot(tmp_path) == before  # no sample set, no cache entry
+
+
+def test_design_file_of_ones_own_runs(tmp_path):
+    (tmp_path / "design.csv").write_text(
+        "case_id,ecoat_gpa,scoat_gpa,tcoat_mm\nmine-1,1.0,0.2,0.012\nmine-2,2.0,0.1,0.05\n")
+    result = _run("doe", "--from", "design.csv", "--run", "--out", "samples.csv", "--json",
+                  cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["design"] == "file"
+    table = pd.read_csv(tmp_path / "samples.csv")
+    assert list(table.case_id) == ["mine-1", "mine-2"]
+    assert table.f60_n.iloc[0] == pytest.approx(9.958, abs=1e-3)
