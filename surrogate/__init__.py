@@ -28,6 +28,12 @@ _LAZY = {
     "fit": "._surrogate_commands",
     "predict": "._surrogate_commands",
     "CoatingSurrogate": ".gp",
+    "Effect": ".effects",
+    "EffectParameter": ".effects",
+    "ModelState": ".effects",
+    "register_effect": ".effects",
+    "load_plugin": ".effects",
+    "available_effects": ".effects",
 }
 
 __all__ = [
@@ -36,8 +42,11 @@ __all__ = [
     "CoatingSurrogate",
     "CurveFeatures",
     "DoeResult",
+    "Effect",
+    "EffectParameter",
     "FitResult",
     "InputDataError",
+    "ModelState",
     "ParameterSpace",
     "ParameterSpec",
     "PredictResult",
@@ -46,13 +55,16 @@ __all__ = [
     "SolverError",
     "StudySpec",
     "SurrogateError",
+    "available_effects",
     "curve_features",
     "doe",
     "fit",
+    "load_plugin",
     "load_study",
     "make_design",
     "paper_stage1_design",
     "predict",
+    "register_effect",
     "simulate",
 ]
 

@@ -68,6 +68,27 @@ def _build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--scoat", type=float, required=True, help="coat yield stress [GPa]")
     sim.add_argument("--tcoat", type=float, required=True, help="coat thickness [mm]")
     _rig_options(sim)
+    sim.add_argument(
+        "--effect",
+        action="append",
+        default=[],
+        metavar="NAME[:P=V,...]",
+        help="switch on a physical effect, e.g. hardening:ratio=0.05 (repeatable)",
+    )
+    sim.add_argument(
+        "--condition",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a test condition, e.g. direction=weft, tension_n=20 (repeatable)",
+    )
+    sim.add_argument(
+        "--plugin",
+        action="append",
+        default=[],
+        metavar="MODULE",
+        help="import a module of your own effects first (repeatable)",
+    )
     sim.add_argument("--out", type=Path, help="write angle_deg,force_n,force_perp_n to this CSV")
     sim.add_argument("--json", action="store_true", help="print one JSON object")
     sim.set_defaults(handler=_simulate)
@@ -242,8 +263,53 @@ def _predict(args: argparse.Namespace) -> int:
     return 0
 
 
+def _parse_effects(items: list[str]) -> dict[str, dict[str, float]]:
+    effects: dict[str, dict[str, float]] = {}
+    for item in items:
+        name, _, rest = item.partition(":")
+        values: dict[str, float] = {}
+        for pair in filter(None, rest.split(",")):
+            key, sep, value = pair.partition("=")
+            if not sep:
+                raise InputDataError(
+                    f"--effect {item!r}: expected NAME:P=V[,P=V], e.g. hardening:ratio=0.05"
+                )
+            try:
+                values[key.strip()] = float(value)
+            except ValueError:
+                raise InputDataError(
+                    f"--effect {item!r}: {key} must be a number, got {value!r}"
+                ) from None
+        effects[name.strip()] = values
+    return effects
+
+
+def _parse_conditions(items: list[str]) -> dict[str, object]:
+    conditions: dict[str, object] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise InputDataError(f"--condition {item!r}: expected NAME=VALUE, e.g. direction=weft")
+        try:
+            conditions[key.strip()] = float(value)
+        except ValueError:
+            conditions[key.strip()] = value.strip()
+    return conditions
+
+
 def _simulate(args: argparse.Namespace) -> int:
-    curve = simulate(args.ecoat, args.scoat, args.tcoat, rig=_rig_from(args))
+    from .effects import load_plugin
+
+    for module in args.plugin:
+        load_plugin(module)
+    curve = simulate(
+        args.ecoat,
+        args.scoat,
+        args.tcoat,
+        rig=_rig_from(args),
+        effects=_parse_effects(args.effect),
+        conditions=_parse_conditions(args.condition),
+    )
     if args.out is not None:
         atomic_write_text(args.out, _curve_csv(curve))
     if args.json:

@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ._conditions import check_conditions, rig_for
 from ._errors import InputDataError
 from ._rig import Rig
 from ._units import gpa_to_mpa
 from ._validate import check_positive
+from .effects import ModelState, get_effect
 from .physics import CoatingSection, curve_features, default_mesh, solve_rod, uniform_mesh
 
 __all__ = ["BendingCurve", "coating_section", "simulate"]
@@ -80,6 +83,8 @@ def simulate(
     tcoat_mm: float,
     *,
     rig: Rig | None = None,
+    effects: Mapping[str, Mapping[str, float]] | None = None,
+    conditions: Mapping[str, Any] | None = None,
 ) -> BendingCurve:
     """Run the built-in full solver of the 2-point bending test.
 
@@ -91,6 +96,12 @@ def simulate(
         Coat layer thickness [mm], 0 < Tcoat < t/2.
     rig : Rig, optional
         The test rig; the default rig of design.md §3 when omitted.
+    effects : mapping, optional
+        Physical effects to switch on, with their parameters, e.g.
+        ``{"hardening": {"ratio": 0.05}}`` (see :mod:`surrogate.effects`).
+    conditions : mapping, optional
+        Conditions of the test: ``tension_n``, ``direction`` (warp/weft),
+        ``rate_deg_s``, ``bending_length_mm``, ``width_mm``.
 
     Returns
     -------
@@ -104,7 +115,23 @@ def simulate(
         The solver did not converge (the message names the angle).
     """
     rig = Rig() if rig is None else rig
-    section = coating_section(ecoat_gpa, scoat_gpa, tcoat_mm, rig)
+    checked = check_conditions(conditions)
+    rig = rig_for(rig, checked)
+    coating_section(ecoat_gpa, scoat_gpa, tcoat_mm, rig)  # validates the coating values
+    state = ModelState(gpa_to_mpa(ecoat_gpa), gpa_to_mpa(scoat_gpa), float(tcoat_mm), rig)
+    for name, values in (effects or {}).items():
+        effect = get_effect(name)
+        state = effect.apply(state, effect.resolve(values), checked)
+    rig = state.rig
+    ratio = state.hardening_ratio
+    section = CoatingSection(
+        state.ecoat_mpa,
+        state.scoat_mpa,
+        state.tcoat_mm,
+        rig.thickness_mm,
+        hardening_modulus_mpa=state.ecoat_mpa * ratio / (1.0 - ratio),
+        extra_stiffness_nmm=state.extra_stiffness_nmm,
+    )
     angles = np.arange(0.0, np.floor(rig.max_angle_deg) + 1.0)
     if rig.element_size_mm is None:
         mesh = default_mesh(rig.free_length_mm, rig.bending_length_mm)

@@ -155,8 +155,10 @@ def test_bad_design_request_writes_nothing(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-BAD_DESIGNS = {**BAD_POINTS,
-               "out-of-range": "case_id,ecoat_gpa,scoat_gpa,tcoat_mm\na,9.0,0.2,0.02\n"}
+BAD_DESIGNS = {
+    **BAD_POINTS,
+    "out-of-range": "case_id,ecoat_gpa,scoat_gpa,tcoat_mm\na,9.0,0.2,0.02\n",
+}
 
 
 @pytest.mark.parametrize("kind", sorted(BAD_DESIGNS))
@@ -172,9 +174,11 @@ def test_bad_design_file_is_refused_and_nothing_written(kind, tmp_path):
 
 def test_design_file_of_ones_own_runs(tmp_path):
     (tmp_path / "design.csv").write_text(
-        "case_id,ecoat_gpa,scoat_gpa,tcoat_mm\nmine-1,1.0,0.2,0.012\nmine-2,2.0,0.1,0.05\n")
-    result = _run("doe", "--from", "design.csv", "--run", "--out", "samples.csv", "--json",
-                  cwd=tmp_path)
+        "case_id,ecoat_gpa,scoat_gpa,tcoat_mm\nmine-1,1.0,0.2,0.012\nmine-2,2.0,0.1,0.05\n"
+    )
+    result = _run(
+        "doe", "--from", "design.csv", "--run", "--out", "samples.csv", "--json", cwd=tmp_path
+    )
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["design"] == "file"
     table = pd.read_csv(tmp_path / "samples.csv")

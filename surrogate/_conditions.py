@@ -1,0 +1,48 @@
+"""Test conditions: what a measured test records about how it was run.
+
+``tension_n``, ``bending_length_mm`` and ``width_mm`` change the rig (the
+tension is the rig's dead end load, not an effect); ``direction`` (warp or
+weft) and ``rate_deg_s`` are read by effects. One place for their checks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from ._errors import InputDataError
+from ._rig import Rig
+from ._validate import check_positive, check_range
+
+__all__ = ["CONDITIONS", "DIRECTIONS", "check_conditions", "rig_for"]
+
+CONDITIONS = ("tension_n", "direction", "rate_deg_s", "bending_length_mm", "width_mm")
+DIRECTIONS = ("warp", "weft")
+_RIG_FIELDS = {
+    "tension_n": "tension_n",
+    "bending_length_mm": "bending_length_mm",
+    "width_mm": "width_mm",
+}
+
+
+def check_conditions(conditions: Mapping[str, Any] | None) -> dict[str, Any]:
+    """Validated conditions; an unknown name or a bad value is an InputDataError."""
+    checked: dict[str, Any] = {}
+    for name, value in (conditions or {}).items():
+        if name not in CONDITIONS:
+            raise InputDataError(f"unknown test condition {name!r}; known: {', '.join(CONDITIONS)}")
+        if name == "direction":
+            if value not in DIRECTIONS:
+                raise InputDataError(f"direction must be warp or weft, got {value!r}")
+            checked[name] = value
+        elif name == "tension_n":
+            checked[name] = check_range(name, value, 0.0, 1e5, unit="N")
+        else:
+            checked[name] = check_positive(name, value)
+    return checked
+
+
+def rig_for(rig: Rig, conditions: Mapping[str, Any]) -> Rig:
+    """The rig of one test: the study's rig with that test's conditions."""
+    changes = {field: conditions[name] for name, field in _RIG_FIELDS.items() if name in conditions}
+    return rig.replace(**changes) if changes else rig

@@ -1,0 +1,21 @@
+"""Physical effects the model can be given (design.md §4)."""
+
+from ._base import (
+    Effect,
+    EffectParameter,
+    ModelState,
+    available_effects,
+    get_effect,
+    load_plugin,
+    register_effect,
+)
+
+__all__ = [
+    "Effect",
+    "EffectParameter",
+    "ModelState",
+    "available_effects",
+    "get_effect",
+    "load_plugin",
+    "register_effect",
+]

@@ -1,0 +1,156 @@
+"""Physical effects: small objects that change the physics of one test.
+
+An effect has a name, declared parameters (bounds, units, the value that
+switches it off), the test conditions it reads, and :meth:`Effect.apply`, which
+turns the model state of one test into a new one. Built-ins live in
+``_builtin.py``; users register their own with :func:`register_effect` from a
+module they name explicitly (``--plugin my_effects``) — code is never loaded
+from a study file's contents.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from .._errors import InputDataError
+from .._rig import Rig
+
+__all__ = [
+    "Effect",
+    "EffectParameter",
+    "ModelState",
+    "available_effects",
+    "get_effect",
+    "load_plugin",
+    "register_effect",
+]
+
+
+@dataclass(frozen=True)
+class EffectParameter:
+    """One parameter of an effect: bounds, unit, and the value that means "off"
+    (NaN: leave the model as it is, e.g. keep the rig's friction)."""
+
+    name: str
+    low: float
+    high: float
+    off: float
+    unit: str = ""
+    log: bool = False
+
+
+@dataclass(frozen=True)
+class ModelState:
+    """What the full solver needs for one test, in solver units (MPa, mm, N).
+
+    ``hardening_ratio`` is the coat's post-yield tangent modulus over Ecoat;
+    ``extra_stiffness_nmm`` an elastic bending stiffness per unit width added
+    to the coat's (e.g. the bare webbing's own).
+    """
+
+    ecoat_mpa: float
+    scoat_mpa: float
+    tcoat_mm: float
+    rig: Rig
+    hardening_ratio: float = 0.0
+    extra_stiffness_nmm: float = 0.0
+
+    def replace(self, **changes: Any) -> ModelState:
+        return dataclasses.replace(self, **changes)
+
+
+class Effect:
+    """Base class of physical effects (subclass it; see ``_builtin.py``)."""
+
+    name: ClassVar[str] = ""
+    description: ClassVar[str] = ""
+    parameters: ClassVar[tuple[EffectParameter, ...]] = ()
+    reads: ClassVar[tuple[str, ...]] = ()
+
+    def apply(
+        self, state: ModelState, values: Mapping[str, float], conditions: Mapping[str, Any]
+    ) -> ModelState:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    # -- shared validation ---------------------------------------------------------------------
+    def resolve(self, values: Mapping[str, float] | None) -> dict[str, float]:
+        """Full parameter values (missing ones at "off"), validated against the bounds."""
+        values = dict(values or {})
+        names = [p.name for p in self.parameters]
+        unknown = [k for k in values if k not in names]
+        if unknown:
+            raise InputDataError(
+                f"effect {self.name!r} has no parameter {unknown[0]!r}; "
+                f"its parameters: {', '.join(names) or 'none'}"
+            )
+        resolved = {}
+        for p in self.parameters:
+            value = values.get(p.name, p.off)
+            if p.name not in values and math.isnan(p.off):
+                resolved[p.name] = math.nan
+                continue
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise InputDataError(
+                    f"{self.name}.{p.name} must be a number, got {value!r}"
+                ) from None
+            if not (p.low <= value <= p.high):
+                raise InputDataError(
+                    f"{self.name}.{p.name} must be in [{p.low:g}, {p.high:g}]"
+                    f"{' ' + p.unit if p.unit else ''}, got {value:g}"
+                )
+            resolved[p.name] = value
+        return resolved
+
+
+_REGISTRY: dict[str, Effect] = {}
+
+
+def register_effect(effect: Effect | type[Effect]) -> Effect:
+    """Make an effect available by its name (an instance or a class)."""
+    instance = effect() if isinstance(effect, type) else effect
+    if not isinstance(instance, Effect) or not instance.name.isidentifier():
+        raise InputDataError(
+            f"an effect needs a subclass of surrogate.Effect with a name that "
+            f"is an identifier, got {effect!r}"
+        )
+    _REGISTRY[instance.name] = instance
+    return instance
+
+
+def get_effect(name: str) -> Effect:
+    from . import _builtin  # noqa: F401  (registers the built-ins)
+
+    if name not in _REGISTRY:
+        raise InputDataError(
+            f"unknown effect {name!r}; available: "
+            f"{', '.join(sorted(_REGISTRY))} (or load a plug-in with --plugin)"
+        )
+    return _REGISTRY[name]
+
+
+def available_effects() -> list[str]:
+    from . import _builtin  # noqa: F401
+
+    return sorted(_REGISTRY)
+
+
+def load_plugin(module: str) -> None:
+    """Import a user's module of effects by its name (it calls :func:`register_effect`)."""
+    if not all(part.isidentifier() for part in module.split(".")):
+        raise InputDataError(
+            f"--plugin takes a Python module name such as my_effects, got {module!r}"
+        )
+    try:
+        importlib.import_module(module)
+    except ImportError as error:
+        raise InputDataError(
+            f"cannot import plug-in module {module!r} ({error}); put it on "
+            "PYTHONPATH or in the working folder"
+        ) from None

@@ -1,0 +1,172 @@
+"""Each built-in effect shows its signature, and nothing else."""
+
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+import surrogate
+from surrogate.physics import bending_stiffness
+
+PAPER = dict(ecoat_gpa=1.0, scoat_gpa=0.2, tcoat_mm=0.012)
+YIELDING = dict(ecoat_gpa=2.0, scoat_gpa=0.1, tcoat_mm=0.05)  # yields at ~17°
+
+
+def _force(effects=None, conditions=None, coating=PAPER):
+    return surrogate.simulate(**coating, effects=effects, conditions=conditions).force_n
+
+
+def test_anisotropy_changes_only_weft_tests():
+    on = {"anisotropy": {"a_e": 0.5, "a_s": 0.5}}
+    np.testing.assert_array_equal(_force(on, {"direction": "warp"}), _force())
+    weft = _force(on, {"direction": "weft"})
+    np.testing.assert_allclose(weft[1:30], 0.5 * _force()[1:30], rtol=1e-6)  # elastic: ∝ E
+
+
+def test_hardening_changes_nothing_before_first_yield():
+    base = surrogate.simulate(**YIELDING)
+    hard = surrogate.simulate(**YIELDING, effects={"hardening": {"ratio": 0.05}})
+    first_yield = int(base.theta_sat_deg) - 8  # well inside the elastic rise
+    # identical up to round-off (the two runs take different Newton paths later on)
+    np.testing.assert_allclose(
+        hard.force_n[:first_yield], base.force_n[:first_yield], rtol=1e-12, atol=1e-12
+    )
+    assert hard.force_n[-1] > 1.02 * base.force_n[-1]  # the plateau rises
+
+
+def test_tension_effect_changes_nothing_at_zero_tension():
+    on = {"tension": {"k_e": 0.02, "k_s": 0.02}}
+    np.testing.assert_array_equal(_force(on, {"tension_n": 0.0}), _force())
+    loaded = _force(None, {"tension_n": 10.0})
+    stiffer = _force(on, {"tension_n": 10.0})
+    assert stiffer[30] > loaded[30] * 1.1  # Ecoat·(1 + 0.02·10) in the elastic rise
+
+
+def test_rate_effect_changes_nothing_at_the_reference_rate():
+    on = {"rate": {"c_e": 0.1, "c_s": 0.1}}
+    np.testing.assert_array_equal(_force(on, {"rate_deg_s": 90.0}), _force())
+    assert _force(on, {"rate_deg_s": 900.0})[30] > _force()[30]
+    assert _force(on, {"rate_deg_s": 9.0})[30] < _force()[30]
+
+
+def test_membrane_bending_adds_its_stiffness():
+    d = bending_stiffness(1000.0, 0.012, 1.2)
+    on = _force({"membrane_bending": {"d0_nmm": 0.5 * d}})
+    np.testing.assert_allclose(on[1:], 1.5 * _force()[1:], rtol=1e-6)  # elastic: ∝ D
+
+
+def test_friction_effect_replaces_the_rigs_friction_and_is_off_by_default():
+    np.testing.assert_array_equal(_force({"friction": {}}), _force())
+    high = surrogate.simulate(**PAPER, effects={"friction": {"mu": 0.3}})
+    rig = surrogate.simulate(**PAPER, rig=surrogate.Rig(friction=0.3))
+    np.testing.assert_array_equal(high.force_n, rig.force_n)
+
+
+@pytest.mark.parametrize(
+    ("effects", "conditions", "fragment"),
+    [
+        ({"gravitas": {}}, None, "unknown effect 'gravitas'"),
+        ({"hardening": {"ratio": 0.9}}, None, "hardening.ratio must be in"),
+        ({"hardening": {"slope": 0.1}}, None, "has no parameter 'slope'"),
+        (None, {"direction": "diagonal"}, "direction must be warp or weft"),
+        (None, {"temperature_c": 20}, "unknown test condition"),
+        (None, {"rate_deg_s": -1}, "rate_deg_s must be > 0"),
+    ],
+)
+def test_bad_effects_and_conditions_are_refused(effects, conditions, fragment):
+    with pytest.raises(surrogate.InputDataError, match=fragment):
+        surrogate.simulate(**PAPER, effects=effects, conditions=conditions)
+
+
+PLUGIN = textwrap.dedent('''
+    import surrogate
+
+
+    class Softening(surrogate.Effect):
+        """Coat modulus falls with temperature: Ecoat·(1 − k·(T − 23 °C))."""
+
+        name = "softening"
+        parameters = (surrogate.EffectParameter("k", 0.0, 0.02, 0.0, "1/K"),)
+        reads = ("tension_n",)
+
+        def apply(self, state, values, conditions):
+            return state.replace(ecoat_mpa=state.ecoat_mpa * (1 - values["k"] * 10))
+
+
+    surrogate.register_effect(Softening)
+''')
+
+
+def test_plugin_effect_from_a_module_named_on_the_command_line(tmp_path):
+    (tmp_path / "my_effects.py").write_text(PLUGIN)
+    base = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "surrogate",
+            "simulate",
+            "--ecoat",
+            "1",
+            "--scoat",
+            "0.2",
+            "--tcoat",
+            "0.012",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=120,
+    )
+    soft = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "surrogate",
+            "simulate",
+            "--ecoat",
+            "1",
+            "--scoat",
+            "0.2",
+            "--tcoat",
+            "0.012",
+            "--plugin",
+            "my_effects",
+            "--effect",
+            "softening:k=0.01",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={"PYTHONPATH": str(tmp_path), "PATH": "/usr/bin:/bin"},
+        timeout=120,
+    )
+    assert soft.returncode == 0, soft.stderr
+    import json
+
+    ratio = json.loads(soft.stdout)["f60_n"] / json.loads(base.stdout)["f60_n"]
+    assert ratio == pytest.approx(0.9, rel=1e-6)  # elastic: F ∝ Ecoat
+    missing = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "surrogate",
+            "simulate",
+            "--ecoat",
+            "1",
+            "--scoat",
+            "0.2",
+            "--tcoat",
+            "0.012",
+            "--plugin",
+            "no_such_module",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=120,
+    )
+    assert missing.returncode == 2 and "cannot import plug-in module" in missing.stderr
