@@ -1,0 +1,184 @@
+"""Measured curves: the long CSV format of design.md §5, validated.
+
+``test_id, angle_deg, force_n`` plus optional condition columns
+(``tension_n, direction, rate_deg_s, bending_length_mm, width_mm``); every
+other column is kept as a covariate for the diagnosis. Conditions and
+covariates are constant within a test. Tests with the same conditions and
+covariates are replicates: their scatter estimates the measurement noise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ._conditions import CONDITIONS, DIRECTIONS
+from ._errors import InputDataError
+
+__all__ = ["MeasurementSet", "load_measurements"]
+
+REQUIRED = ("test_id", "angle_deg", "force_n")
+_UNITLESS = {
+    "tension": "tension_n",
+    "rate": "rate_deg_s",
+    "bending_length": "bending_length_mm",
+    "width": "width_mm",
+    "angle": "angle_deg",
+    "force": "force_n",
+}
+
+
+@dataclass(frozen=True)
+class MeasurementSet:
+    """Validated measured curves.
+
+    Attributes
+    ----------
+    curves : DataFrame
+        Long format, sorted by test then angle.
+    tests : DataFrame
+        One row per test: ``test_id``, its conditions and covariates.
+    conditions : tuple of str
+        Condition columns present.
+    covariates : tuple of str
+        Other columns (kept for the diagnosis).
+    noise_n : float or None
+        Noise estimated from replicates (pooled standard deviation), if any.
+    """
+
+    curves: pd.DataFrame
+    tests: pd.DataFrame
+    conditions: tuple[str, ...]
+    covariates: tuple[str, ...]
+    noise_n: float | None
+
+    def curve(self, test_id: Any) -> tuple[np.ndarray, np.ndarray]:
+        rows = self.curves[self.curves.test_id == test_id]
+        return rows.angle_deg.to_numpy(float), rows.force_n.to_numpy(float)
+
+    def conditions_of(self, test_id: Any) -> dict[str, Any]:
+        row = self.tests[self.tests.test_id == test_id].iloc[0]
+        return {
+            name: (row[name] if name == "direction" else float(row[name]))
+            for name in self.conditions
+        }
+
+
+def load_measurements(path: str | Path) -> MeasurementSet:
+    """Read and validate a measurement file; a bad one raises InputDataError (one line)."""
+    path = Path(path)
+    if not path.exists():
+        raise InputDataError(f"measurement file {path} does not exist; check the path")
+    try:
+        table = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
+        first = str(error).strip().splitlines()[0] if str(error).strip() else "unreadable"
+        raise InputDataError(f"measurement file {path} is not a readable CSV ({first})") from None
+    return measurements_from(table, where=str(path))
+
+
+def measurements_from(table: pd.DataFrame, *, where: str = "measurements") -> MeasurementSet:
+    _check_columns(table, where)
+    for name in (
+        "angle_deg",
+        "force_n",
+        *[c for c in CONDITIONS if c in table and c != "direction"],
+    ):
+        values = pd.to_numeric(table[name], errors="coerce").to_numpy(float)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            line = int(np.argmax(bad)) + 2
+            raise InputDataError(
+                f"{where}: column {name} has a missing, NaN, inf or "
+                f"non-numeric value at line {line}; fix or remove the row"
+            )
+        table[name] = values
+    if (table.force_n < 0).any():
+        line = int(np.argmax((table.force_n < 0).to_numpy())) + 2
+        raise InputDataError(
+            f"{where}: force_n must be ≥ 0 (the probe only pushes), got "
+            f"{table.force_n.iloc[line - 2]:g} at line {line}"
+        )
+    if "direction" in table:
+        odd = sorted(set(table.direction.astype(str)) - set(DIRECTIONS))
+        if odd:
+            raise InputDataError(f"{where}: direction must be warp or weft, got {odd[0]!r}")
+    conditions = tuple(c for c in CONDITIONS if c in table)
+    covariates = tuple(c for c in table.columns if c not in (*REQUIRED, *conditions))
+    _check_tests(table, conditions + covariates, where)
+    tests = table.groupby("test_id", sort=False).first().reset_index()
+    tests = tests[["test_id", *conditions, *covariates]]
+    return MeasurementSet(
+        table.reset_index(drop=True),
+        tests,
+        conditions,
+        covariates,
+        _replicate_noise(table, tests, conditions + covariates),
+    )
+
+
+def _check_columns(table: pd.DataFrame, where: str) -> None:
+    if table.empty:
+        raise InputDataError(f"{where}: no rows")
+    for column in table.columns:
+        if column in _UNITLESS:
+            raise InputDataError(
+                f"{where}: column {column!r} has no unit; name it {_UNITLESS[column]!r}"
+            )
+    missing = [c for c in REQUIRED if c not in table.columns]
+    if missing:
+        raise InputDataError(
+            f"{where}: missing column(s) {', '.join(missing)}; the format is "
+            "test_id, angle_deg, force_n[, conditions…]"
+        )
+
+
+def _check_tests(table: pd.DataFrame, constant: tuple[str, ...], where: str) -> None:
+    for test_id, rows in table.groupby("test_id", sort=False):
+        angles = rows.angle_deg.to_numpy()
+        if len(angles) < 3:
+            raise InputDataError(
+                f"{where}: test {test_id!r} has {len(angles)} points; a curve needs at least 3"
+            )
+        if len(np.unique(angles)) != len(angles):
+            raise InputDataError(
+                f"{where}: test {test_id!r} has duplicate angles; keep one point per angle"
+            )
+        if np.any(np.diff(angles) < 0):
+            raise InputDataError(
+                f"{where}: test {test_id!r} has unsorted angles; sort the "
+                "rows of each test by angle_deg"
+            )
+        for column in constant:
+            if rows[column].nunique(dropna=False) > 1:
+                raise InputDataError(
+                    f"{where}: {column} changes within test {test_id!r}; a "
+                    "test has one value of each condition"
+                )
+
+
+def _replicate_noise(
+    table: pd.DataFrame, tests: pd.DataFrame, keys: tuple[str, ...]
+) -> float | None:
+    """Pooled standard deviation of replicates at common angles, or None."""
+    groups = tests.groupby(list(keys), dropna=False).test_id if keys else [(None, tests.test_id)]
+    squares, dof = 0.0, 0
+    for _, ids in groups:
+        if len(ids) < 2:
+            continue
+        curves = [table[table.test_id == t] for t in ids]
+        low = max(c.angle_deg.min() for c in curves)
+        high = min(c.angle_deg.max() for c in curves)
+        # the first test's own angles: no smoothing where replicates share angles
+        first = curves[0].angle_deg.to_numpy()
+        grid = first[(first >= low) & (first <= high) & (first > 0.0)]
+        if grid.size < 3:
+            continue
+        forces = np.array([np.interp(grid, c.angle_deg, c.force_n) for c in curves])
+        squares += float(np.sum((forces - forces.mean(axis=0)) ** 2))
+        dof += grid.size * (len(ids) - 1)
+    return float(np.sqrt(squares / dof)) if dof else None
