@@ -87,8 +87,8 @@ def assess_identifiability(
     shown = [k for k in np.argsort(-np.abs(exponents)) if abs(exponents[k]) >= _SHOWN_EXPONENT]
     combination = " · ".join(f"{_LABELS.get(names[k], names[k])}^{exponents[k]:.2f}" for k in shown)
     value = float(np.exp(exponents @ log_chosen))
-    points = np.atleast_2d(equally_good) if len(equally_good) else log_chosen[None, :1] * 0
     if len(equally_good):
+        points = np.atleast_2d(equally_good)
         combos = np.log(np.atleast_2d(equally_good)) @ exponents
         spread = float(np.exp((combos.max() - combos.min()) / 2.0) - 1.0)
         ranges = {

@@ -225,16 +225,7 @@ class _Verifier:
         for point in np.atleast_2d(points):
             if self.calls >= self.spec.budget.max_solver_calls:
                 return
-            params = dict(zip(self.names, map(float, point), strict=True))
-            inputs = solver_inputs(params, self.spec.rig, solver=self.spec.solver)
-            key = input_hash(inputs)
-            if key in self.records:
-                continue  # finished runs are never repeated
-            result = self.cache.get(key)
-            if result is None:
-                result = solve_inputs(inputs)
-                self.cache.put(key, inputs, result)
-            self.records[key] = self._tell(params, key, result, phase)
+            self._solve(dict(zip(self.names, map(float, point), strict=True)), phase=phase)
         self._report(phase)
 
     def _tell(
@@ -299,6 +290,7 @@ class _Verifier:
         return gradient
 
     def _solve(self, params: dict[str, float], *, phase: str) -> dict[str, Any]:
+        """One full-solver run as a trial; a finished run is never repeated."""
         inputs = solver_inputs(params, self.spec.rig, solver=self.spec.solver)
         key = input_hash(inputs)
         if key not in self.records:

@@ -16,7 +16,7 @@ from ._validate import check_positive
 from .effects import ModelState, get_effect
 from .physics import CoatingSection, curve_features, default_mesh, solve_rod, uniform_mesh
 
-__all__ = ["BendingCurve", "coating_section", "simulate"]
+__all__ = ["BendingCurve", "coating_state", "simulate"]
 
 
 @dataclass(frozen=True)
@@ -61,10 +61,8 @@ class BendingCurve:
         }
 
 
-def coating_section(
-    ecoat_gpa: float, scoat_gpa: float, tcoat_mm: float, rig: Rig
-) -> CoatingSection:
-    """Validate the coating values in the paper's units and build the section law."""
+def coating_state(ecoat_gpa: float, scoat_gpa: float, tcoat_mm: float, rig: Rig) -> ModelState:
+    """Validate the coating values in the paper's units; the model state in MPa, mm."""
     ecoat = check_positive("ecoat_gpa", ecoat_gpa, unit="GPa")
     scoat = check_positive("scoat_gpa", scoat_gpa, unit="GPa")
     tcoat = check_positive("tcoat_mm", tcoat_mm, unit="mm")
@@ -74,7 +72,7 @@ def coating_section(
             f"tcoat_mm must be < thickness_mm/2 = {half:g} mm (two coat layers fit in the "
             f"webbing), got {tcoat:g}"
         )
-    return CoatingSection(gpa_to_mpa(ecoat), gpa_to_mpa(scoat), tcoat, rig.thickness_mm)
+    return ModelState(gpa_to_mpa(ecoat), gpa_to_mpa(scoat), tcoat, rig)
 
 
 def simulate(
@@ -117,8 +115,7 @@ def simulate(
     rig = Rig() if rig is None else rig
     checked = check_conditions(conditions)
     rig = rig_for(rig, checked)
-    coating_section(ecoat_gpa, scoat_gpa, tcoat_mm, rig)  # validates the coating values
-    state = ModelState(gpa_to_mpa(ecoat_gpa), gpa_to_mpa(scoat_gpa), float(tcoat_mm), rig)
+    state = coating_state(ecoat_gpa, scoat_gpa, tcoat_mm, rig)
     for name, values in (effects or {}).items():
         effect = get_effect(name)
         state = effect.apply(state, effect.resolve(values), checked)

@@ -1,6 +1,5 @@
 """Measurement files: the long format, validated; replicates estimate the noise."""
 
-
 import numpy as np
 import pandas as pd
 import pytest
