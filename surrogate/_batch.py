@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
@@ -25,8 +25,20 @@ __all__ = ["evaluate_design", "solve_inputs", "solver_inputs"]
 SOLVERS = ("builtin",)
 
 
-def solver_inputs(point: dict[str, float], rig: Rig, *, solver: str = "builtin") -> dict[str, Any]:
-    """Everything that determines a run's result, as plain JSON data."""
+def solver_inputs(
+    point: dict[str, float],
+    rig: Rig,
+    *,
+    solver: str = "builtin",
+    effects: Mapping[str, Mapping[str, float]] | None = None,
+    conditions: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Everything that determines a run's result, as plain JSON data.
+
+    ``effects`` maps effect names to their parameter values and ``conditions``
+    holds the test's conditions (see :func:`surrogate.simulate`); both enter
+    the input hash, so a run at other conditions is never taken from the cache.
+    """
     if solver not in SOLVERS:
         raise InputDataError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
     missing = [name for name in COATING_PARAMETERS if name not in point]
@@ -39,8 +51,14 @@ def solver_inputs(point: dict[str, float], rig: Rig, *, solver: str = "builtin")
         "solver_version": SOLVER_VERSION,
         "params": {name: float(point[name]) for name in COATING_PARAMETERS},
         "rig": rig.to_dict(),
-        "effects": {},
-        "conditions": {},
+        "effects": {
+            name: {key: float(value) for key, value in sorted(values.items())}
+            for name, values in sorted((effects or {}).items())
+        },
+        "conditions": {
+            key: value if isinstance(value, str) else float(value)
+            for key, value in sorted((conditions or {}).items())
+        },
     }
 
 
@@ -49,7 +67,12 @@ def solve_inputs(inputs: dict[str, Any]) -> dict[str, Any]:
     params = inputs["params"]
     try:
         curve = simulate(
-            params["ecoat_gpa"], params["scoat_gpa"], params["tcoat_mm"], rig=Rig(**inputs["rig"])
+            params["ecoat_gpa"],
+            params["scoat_gpa"],
+            params["tcoat_mm"],
+            rig=Rig(**inputs["rig"]),
+            effects=inputs.get("effects") or None,
+            conditions=inputs.get("conditions") or None,
         )
     except (SolverError, InputDataError) as error:
         return {"status": "failed", "reason": str(error)}
