@@ -143,6 +143,8 @@ def simulate(
         contact_radius_mm=rig.contact_radius_mm,
         friction=rig.friction,
         tension_n=rig.tension_n,
+        line_load_n_mm=state.line_load_n_mm,
+        clamp_stiffness_nmm=state.clamp_stiffness_nmm,
     )
     features = curve_features(solution.angle_deg, solution.force_n)
     return BendingCurve(

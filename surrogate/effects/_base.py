@@ -50,7 +50,9 @@ class ModelState:
 
     ``hardening_ratio`` is the coat's post-yield tangent modulus over Ecoat;
     ``extra_stiffness_nmm`` an elastic bending stiffness per unit width added
-    to the coat's (e.g. the bare webbing's own).
+    to the coat's (e.g. the bare webbing's own); ``line_load_n_mm`` the strip's
+    self-weight per unit length, full width; ``clamp_stiffness_nmm`` the
+    clamp's rotational stiffness, full width [N·mm/rad] (``None``: rigid).
     """
 
     ecoat_mpa: float
@@ -59,6 +61,8 @@ class ModelState:
     rig: Rig
     hardening_ratio: float = 0.0
     extra_stiffness_nmm: float = 0.0
+    line_load_n_mm: float = 0.0
+    clamp_stiffness_nmm: float | None = None
 
     def replace(self, **changes: Any) -> ModelState:
         return dataclasses.replace(self, **changes)
@@ -90,10 +94,10 @@ class Effect:
             )
         resolved = {}
         for p in self.parameters:
-            value = values.get(p.name, p.off)
-            if p.name not in values and math.isnan(p.off):
-                resolved[p.name] = math.nan
+            if p.name not in values:
+                resolved[p.name] = p.off  # "off" may lie outside the bounds (NaN, inf)
                 continue
+            value = values[p.name]
             try:
                 value = float(value)
             except (TypeError, ValueError):

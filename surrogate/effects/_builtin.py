@@ -9,9 +9,19 @@ from typing import Any
 from .._errors import InputDataError
 from ._base import Effect, EffectParameter, ModelState, register_effect
 
-__all__ = ["Anisotropy", "Friction", "Hardening", "MembraneBending", "Rate", "Tension"]
+__all__ = [
+    "Anisotropy",
+    "ClampSlip",
+    "Friction",
+    "Gravity",
+    "Hardening",
+    "MembraneBending",
+    "Rate",
+    "Tension",
+]
 
 REFERENCE_RATE_DEG_S = 90.0
+STANDARD_GRAVITY_M_S2 = 9.80665
 
 
 class Tension(Effect):
@@ -106,5 +116,47 @@ class Friction(Effect):
         return state.replace(rig=state.rig.replace(friction=values["mu"]))
 
 
-for _effect in (Tension, Hardening, Anisotropy, Rate, MembraneBending, Friction):
+class Gravity(Effect):
+    name = "gravity"
+    description = (
+        "self-weight of the strip (areal mass), acting downwards, away from the probe: "
+        "the strip sags and touches the probe only after some rotation"
+    )
+    parameters = (EffectParameter("areal_mass_g_m2", 0.0, 20000.0, 0.0, "g/m²"),)
+    reads = ("width_mm",)
+
+    def apply(
+        self, state: ModelState, values: Mapping[str, float], conditions: Mapping[str, Any]
+    ) -> ModelState:
+        # g/m² → N/mm² is ·1e-3 kg/g · g₀ · 1e-6 m²/mm²; times the width: N/mm.
+        pressure = values["areal_mass_g_m2"] * 1e-9 * STANDARD_GRAVITY_M_S2
+        return state.replace(line_load_n_mm=state.line_load_n_mm + pressure * state.rig.width_mm)
+
+
+class ClampSlip(Effect):
+    name = "clamp_slip"
+    description = (
+        "rotational compliance in the clamp: a spring k per unit width between the fixture "
+        "and the strip (softens the rise at small angles)"
+    )
+    parameters = (EffectParameter("k_nmm_rad", 2.0, 2000.0, math.inf, "N·mm/rad per mm", log=True),)
+
+    def apply(
+        self, state: ModelState, values: Mapping[str, float], conditions: Mapping[str, Any]
+    ) -> ModelState:
+        if math.isinf(values["k_nmm_rad"]):
+            return state
+        return state.replace(clamp_stiffness_nmm=values["k_nmm_rad"] * state.rig.width_mm)
+
+
+for _effect in (
+    Tension,
+    Hardening,
+    Anisotropy,
+    Rate,
+    MembraneBending,
+    Friction,
+    Gravity,
+    ClampSlip,
+):
     register_effect(_effect)

@@ -20,9 +20,20 @@ J          (2, N) derivative of the contact point with respect to ``psi``.
 
 Each load step solves the KKT system of the incremental problem by Newton's
 method: bending moments from the section law, the dead tension at the free
-end, frictional contact with the probe (regularised Coulomb law on the slip of
-the material point in contact), and the gap equation.  The Jacobian is exact
-(checked against finite differences in the tests).
+end, the self-weight (a dead load ``q`` per unit length along -z), frictional
+contact with the probe (regularised Coulomb law on the slip of the material
+point in contact), and the gap equation.  The Jacobian is exact (checked
+against finite differences in the tests).
+
+Contact is an active set: under self-weight the strip sags away from the probe
+and touches it only after some rotation, and it may lift off again; a step
+whose contact force comes out negative is solved again without contact, and a
+free step that penetrates the probe again with it.
+
+A compliant clamp (rotational spring ``k_c`` [N·mm/rad] between the fixture
+and the strip) is a zero-length first segment whose angle is the strip's
+tangent at the clamp edge: node 0 carries the spring moment
+``k_c·(psi[0] − theta)`` instead of the section law.
 """
 
 from __future__ import annotations
@@ -190,6 +201,8 @@ class _Evaluation:
     friction_n: float  # friction force on the strip along the contact tangent [N]
     sticking: bool
     slip_vec: np.ndarray
+    active: bool = True  # the contact force acts (False: the strip is off the probe)
+    gap: float = 0.0  # of a free strip: distance from the probe surface [mm], < 0 penetrates
 
 
 @dataclass(frozen=True)
@@ -217,9 +230,18 @@ class _Problem:
         contact_radius_mm: float | None,
         friction: float,
         tension_n: float,
+        line_load_n_mm: float = 0.0,
+        clamp_stiffness_nmm: float | None = None,
     ) -> None:
         self.section = section
+        if clamp_stiffness_nmm is not None:
+            h = np.concatenate([[0.0], h])  # the zero-length clamp segment
         self.h = h
+        self.spring = clamp_stiffness_nmm
+        self.line_load = line_load_n_mm
+        # Weight moment arm of each segment: the length it carries downstream.
+        self.carried = np.cumsum(h[::-1])[::-1] - 0.5 * h
+        self.active = True  # the contact is in the active set
         self.N = h.size
         self.width = width_mm
         # No probe (None) is for verification against the cantilever table.
@@ -231,9 +253,13 @@ class _Problem:
         ell = np.empty(self.N)
         ell[0] = h[0] / 2.0
         ell[1:] = 0.5 * (h[:-1] + h[1:])
+        if self.spring is not None:
+            ell[0] = 1.0  # placeholder: node 0 is the spring, not a section
         self.ell = ell
         self.stiffness_scale = section.stiffness_nmm * width_mm / bending_length_mm
         self.elastic_stiff = section.stiffness_nmm * width_mm / self.ell
+        if self.spring is not None:
+            self.elastic_stiff[0] = self.spring
         self.stick_stiffness = _STICK_STIFFNESS_FACTOR * self.stiffness_scale / bending_length_mm**2
         self._diag = np.arange(self.N)
 
@@ -257,16 +283,43 @@ class _Problem:
         kappa[0] = psi[0] - theta
         kappa[1:] = psi[1:] - psi[:-1]
         kappa /= self.ell
+        if self.spring is not None:
+            rotation = kappa[0]
+            kappa[0] = 0.0  # the spring node keeps an unused, unloaded section
         m_unit, c_unit, state = self.section.respond(kappa, previous.state)
         moment = m_unit * self.width
+        stiff = c_unit * self.width / self.ell
+        if self.spring is not None:
+            moment[0] = self.spring * rotation
+            stiff[0] = self.spring
         residual = np.empty(N + 1)
         residual[:N] = moment
         residual[: N - 1] -= moment[1:]
         e, n = _directions(psi)
         if self.tension:
             residual[:N] += self.tension * h * e[:, 1]
-        stiff = c_unit * self.width / self.ell
-        if not self.has_probe:
+        if self.line_load:
+            residual[:N] += self.line_load * h * self.carried * e[:, 0]
+        if not self.has_probe or not self.active:
+            if self.has_probe:
+                contact = _find_contact(h, e, n, _nodes(h, e), self.centre, preferred)
+                residual[N] = lam
+                return _Evaluation(
+                    psi,
+                    lam,
+                    residual,
+                    state,
+                    moment,
+                    stiff,
+                    kappa,
+                    e,
+                    contact,
+                    0.0,
+                    False,
+                    np.zeros(2),
+                    active=False,
+                    gap=contact.distance - self.rho,
+                )
             residual[N] = lam
             return _Evaluation(
                 psi, lam, residual, state, moment, stiff, kappa, e, None, 0.0, False, np.zeros(2)
@@ -317,10 +370,12 @@ class _Problem:
         diag[:-1] += stiff[1:]
         if self.tension:
             diag += self.tension * h * ev.e[:, 0]
+        if self.line_load:
+            diag -= self.line_load * h * self.carried * ev.e[:, 1]
         jacobian[idx, idx] = diag
         jacobian[idx[:-1], idx[1:]] = -stiff[1:]
         jacobian[idx[1:], idx[:-1]] = -stiff[1:]
-        if contact is None:
+        if contact is None or not ev.active:
             jacobian[N, N] = 1.0
             return jacobian
         k, up = contact.segment, contact.upstream
@@ -364,7 +419,7 @@ class _Problem:
     def forces(self, ev: _Evaluation) -> tuple[float, float]:
         """Resultant and perpendicular force on the probe [N]."""
         contact = ev.contact
-        if contact is None:
+        if contact is None or not ev.active:
             return 0.0, 0.0
         on_probe = ev.lam * contact.normal - ev.friction_n * contact.tangent
         return float(np.hypot(on_probe[0], on_probe[1])), float(on_probe[1])
@@ -502,6 +557,8 @@ def solve_rod(
     contact_radius_mm: float,
     friction: float,
     tension_n: float = 0.0,
+    line_load_n_mm: float = 0.0,
+    clamp_stiffness_nmm: float | None = None,
 ) -> RodSolution:
     """Rotate the clamp through ``angles_deg`` (increasing, from 0) and record.
 
@@ -522,6 +579,12 @@ def solve_rod(
         Coulomb coefficient at the probe.
     tension_n : float
         Dead load at the free end along +x [N].
+    line_load_n_mm : float
+        Self-weight per unit length of the strip (full width), along -z
+        [N/mm]; the strip sags away from the probe before the rotation starts.
+    clamp_stiffness_nmm : float, optional
+        Rotational stiffness of the clamp (full width) [N·mm/rad]; ``None``
+        is a rigid clamp.
 
     Raises
     ------
@@ -538,6 +601,8 @@ def solve_rod(
         contact_radius_mm=contact_radius_mm,
         friction=friction,
         tension_n=tension_n,
+        line_load_n_mm=line_load_n_mm,
+        clamp_stiffness_nmm=clamp_stiffness_nmm,
     )
     at_rest = (0.0, 0.0, 0.0, bending_length_mm, 0.0, 0.0)
     history = [
@@ -568,6 +633,8 @@ def _march(
     """
     n = problem.N
     current = problem.configuration(np.zeros(n), 0.0, problem.section.initial_state(n), 0.0)
+    if problem.line_load:
+        current = _sag(problem, current)
     rates = (np.zeros(n), 0.0)  # d(psi)/d(theta), d(lam)/d(theta) of the last step
     theta_done = 0.0
     last: _Evaluation | None = None
@@ -578,9 +645,7 @@ def _march(
             dtheta = theta - theta_done
             guess_psi = current.psi + rates[0] * dtheta
             guess_lam = max(current.lam + rates[1] * dtheta, 0.0)
-            ev = _newton(problem, guess_psi, guess_lam, theta, current)
-            if ev is None:
-                ev = _initial_stiffness(problem, guess_psi, guess_lam, theta, current)
+            ev = _step(problem, guess_psi, guess_lam, theta, current)
             if ev is None:
                 substeps *= 2
                 if substeps > 2**_MAX_BISECTIONS:
@@ -598,8 +663,54 @@ def _march(
         yield last, current
 
 
+def _step(
+    problem: _Problem,
+    psi: np.ndarray,
+    lam: float,
+    theta: float,
+    previous: _Configuration,
+) -> _Evaluation | None:
+    """One load step with the contact's active set; ``None`` when it fails.
+
+    Only a strip under self-weight may leave the probe; without it a negative
+    contact force is an error (see :func:`_check_contact`).
+    """
+    was_active = problem.active
+    for _ in range(3):
+        ev = _newton(problem, psi, lam, theta, previous)
+        if ev is None:
+            ev = _initial_stiffness(problem, psi, lam, theta, previous)
+        if ev is None:
+            break
+        if problem.active and ev.lam < 0.0 and problem.line_load:
+            problem.active, lam = False, 0.0
+        elif not problem.active and ev.gap < 0.0:
+            problem.active, lam = True, 0.0
+        else:
+            return ev
+    problem.active = was_active
+    return None
+
+
+def _sag(problem: _Problem, rest: _Configuration) -> _Configuration:
+    """Equilibrium at 0° under self-weight, off the probe (the weight ramped in)."""
+    load = problem.line_load
+    problem.active = False
+    current = rest
+    for fraction in np.linspace(0.0, 1.0, 5)[1:]:
+        problem.line_load = fraction * load
+        ev = _newton(problem, current.psi, 0.0, 0.0, current)
+        if ev is None:
+            raise SolverError("the strip did not find its equilibrium under its own weight at 0°")
+        current = problem.configuration(ev.psi, 0.0, ev.state, 0.0)
+    problem.line_load = load
+    if ev.gap < 0.0:  # cannot happen with the probe above the strip; kept as a guard
+        problem.active = True
+    return current
+
+
 def _check_contact(ev: _Evaluation, n_segments: int, theta: float) -> None:
-    if ev.contact is None:
+    if ev.contact is None or not ev.active:
         return
     if ev.contact.upstream >= n_segments:
         raise SolverError(

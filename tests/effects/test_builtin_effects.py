@@ -170,3 +170,31 @@ def test_plugin_effect_from_a_module_named_on_the_command_line(tmp_path):
         timeout=120,
     )
     assert missing.returncode == 2 and "cannot import plug-in module" in missing.stderr
+
+
+def test_gravity_lets_the_strip_sag_off_the_probe_and_costs_its_weight_share():
+    soft = dict(ecoat_gpa=0.05, scoat_gpa=0.01, tcoat_mm=0.012)
+    base = surrogate.simulate(**soft)
+    heavy = surrogate.simulate(**soft, effects={"gravity": {"areal_mass_g_m2": 1200}})
+    assert base.force_n[1] > 0  # without weight the probe is touched from the start
+    assert heavy.force_n[1] == 0.0 and heavy.force_n[3] == 0.0  # sagged off the probe
+    # once in contact, the probe carries less: the weight's moment about the clamp
+    # (weight W at mid-length 17.5 mm, lever shortened by the rotation) over l = 10 mm
+    weight = 1200e-9 * 9.80665 * 38.0 * 35.0
+    drop = base.force_n[40:] - heavy.force_n[40:]
+    assert np.all(drop > 0.3 * weight * 17.5 / 10) and np.all(drop < 1.2 * weight * 17.5 / 10)
+    zero = _force({"gravity": {"areal_mass_g_m2": 0.0}})
+    np.testing.assert_array_equal(zero, _force())
+
+
+def test_clamp_slip_softens_the_rise_and_vanishes_for_a_stiff_clamp():
+    slip = _force({"clamp_slip": {"k_nmm_rad": 10.0}})
+    rigid = _force()
+    # small angles: a spring in series with the strip, F ∝ 1/(1/k_strip + 1/k_clamp)
+    k_strip = 3 * bending_stiffness(1000.0, 0.012, 1.2) * 38.0 / 10.0**2 * 10.0  # F·l/θ
+    k_clamp = 10.0 * 38.0
+    expected = 1.0 / (1.0 + k_strip / k_clamp)
+    np.testing.assert_allclose(slip[1] / rigid[1], expected, rtol=0.03)
+    stiff = _force({"clamp_slip": {"k_nmm_rad": 2000.0}})
+    np.testing.assert_allclose(stiff[1:], rigid[1:], rtol=0.02)
+    np.testing.assert_array_equal(_force({"clamp_slip": {}}), rigid)  # off: a rigid clamp

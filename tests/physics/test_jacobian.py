@@ -77,3 +77,47 @@ def test_jacobian_matches_finite_differences(mesh, section, mu, angle, tension, 
         assert not ev.sticking and ev.friction_n != 0.0
     else:
         assert not ev.contact.on_vertex
+
+
+@pytest.mark.parametrize(
+    ("line_load", "spring", "mu", "angle"),
+    [
+        (2e-3, None, 0.1, 30),  # self-weight, in contact
+        (0.0, 200.0, 0.1, 30),  # compliant clamp
+        (2e-3, 200.0, 0.0, 40),  # both
+    ],
+)
+def test_jacobian_with_self_weight_and_clamp_spring(line_load, spring, mu, angle):
+    problem = _Problem(
+        CoatingSection(1000, 200, 0.012, 1.2),
+        default_mesh(35, L),
+        width_mm=B,
+        bending_length_mm=L,
+        contact_radius_mm=1.6,
+        friction=mu,
+        tension_n=0.0,
+        line_load_n_mm=line_load,
+        clamp_stiffness_nmm=spring,
+    )
+    previous = _converged_at(problem, angle - 1)
+    assert problem.active
+    psi = previous.psi + 1e-3 * np.random.default_rng(1).standard_normal(problem.N)
+    _check(problem, previous, psi, previous.lam * 1.01, np.radians(angle))
+
+
+def test_jacobian_of_a_free_strip_under_self_weight():
+    problem = _Problem(
+        CoatingSection(50, 10, 0.012, 1.2),
+        default_mesh(35, L),
+        width_mm=B,
+        bending_length_mm=L,
+        contact_radius_mm=1.6,
+        friction=0.1,
+        tension_n=0.0,
+        line_load_n_mm=5e-3,
+    )
+    previous = _converged_at(problem, 1)
+    assert not problem.active  # a soft strip still hangs below the probe at 1°
+    psi = previous.psi + 1e-3 * np.random.default_rng(2).standard_normal(problem.N)
+    ev = _check(problem, previous, psi, 0.0, np.radians(2))
+    assert ev.gap > 0
