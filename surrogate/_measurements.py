@@ -3,8 +3,9 @@
 ``test_id, angle_deg, force_n`` plus optional condition columns
 (``tension_n, direction, rate_deg_s, bending_length_mm, width_mm``); every
 other column is kept as a covariate for the diagnosis. Conditions and
-covariates are constant within a test. Tests with the same conditions and
-covariates are replicates: their scatter estimates the measurement noise.
+covariates are constant within a test. Tests with the same conditions are
+replicates (a covariate such as the lab temperature may differ between them):
+their scatter estimates the measurement noise.
 """
 
 from __future__ import annotations
@@ -117,7 +118,7 @@ def measurements_from(table: pd.DataFrame, *, where: str = "measurements") -> Me
         tests,
         conditions,
         covariates,
-        _replicate_noise(table, tests, conditions + covariates),
+        _replicate_noise(table, tests, conditions),
     )
 
 
