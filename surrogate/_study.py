@@ -64,6 +64,7 @@ class Budget:
     candidates_per_iteration: int = 1
     surrogate_trials: int = 300
     identifiability_runs: int = 3
+    calibration_solver_calls: int = 200
 
 
 @dataclass(frozen=True)
@@ -147,11 +148,17 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
             )
     model = _section(data, "model", where)
     _only(model, ("effects",), where, "model")
-    effects = tuple(model.get("effects", ()))
-    if effects:
+    effects = model.get("effects", [])
+    if not isinstance(effects, list) or not all(
+        isinstance(e, str) and e.isidentifier() for e in effects
+    ):
         raise InputDataError(
-            f"{where}: [model] effects are not available yet, got {list(effects)}; remove the key"
+            f"{where}: [model] effects must be a list of effect names such as "
+            f'["tension"], got {effects!r}'
         )
+    if len(set(effects)) != len(effects):
+        raise InputDataError(f"{where}: [model] effects names an effect twice: {effects!r}")
+    effects = tuple(effects)
     budget = _budget(_section(data, "budget", where), where)
     if targets.f60_n is None and measurements is None:
         raise InputDataError(
@@ -315,6 +322,7 @@ def _budget(section: dict[str, Any], where: str) -> Budget:
             "candidates_per_iteration",
             "surrogate_trials",
             "identifiability_runs",
+            "calibration_solver_calls",
         ),
         where,
         "budget",
@@ -355,4 +363,10 @@ def _budget(section: dict[str, Any], where: str) -> Budget:
         "budget.identifiability_runs",
         low=0,
     )
-    return Budget(initial, calls, per, trials, identifiability)
+    calibration = _int(
+        section.get("calibration_solver_calls", default.calibration_solver_calls),
+        where,
+        "budget.calibration_solver_calls",
+        low=10,
+    )
+    return Budget(initial, calls, per, trials, identifiability, calibration)
