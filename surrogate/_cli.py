@@ -147,12 +147,135 @@ def _build_parser() -> argparse.ArgumentParser:
     running.add_argument("--json", action="store_true", help="print one JSON object")
     running.set_defaults(handler=_run)
 
+    cal = commands.add_parser(
+        "calibrate", help="fit the coating and the model's effects to the measured curves"
+    )
+    cal.add_argument("study", type=Path, help="study file with [measurements]")
+    _model_options(cal)
+    cal.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
+    cal.add_argument(
+        "--budget", type=int, help="override [budget] calibration_solver_calls (full-solver runs)"
+    )
+    cal.add_argument("--jobs", type=int, default=1, help="solver processes per verification")
+    cal.add_argument("--json", action="store_true", help="print one JSON object")
+    cal.set_defaults(handler=_calibrate)
+
+    comp = commands.add_parser(
+        "compare", help="measured vs model curves: residuals per test, angle band, covariate"
+    )
+    comp.add_argument("study", type=Path, help="study file with [measurements]")
+    _model_options(comp)
+    comp.add_argument(
+        "--params",
+        help="parameters to compare, e.g. ecoat_gpa=1.2,scoat_gpa=0.15,tcoat_mm=0.02 "
+        "(default: the last calibration of this model)",
+    )
+    comp.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
+    comp.add_argument("--output", type=Path, help="folder of the PNG plots")
+    comp.add_argument("--no-plots", action="store_true", help="write no PNG files")
+    comp.add_argument("--json", action="store_true", help="print one JSON object")
+    comp.set_defaults(handler=_compare)
+
     board = commands.add_parser("dashboard", help="optuna-dashboard of a study, on 127.0.0.1")
     board.add_argument("study", type=Path, help="study file")
     board.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
     board.add_argument("--port", type=int, default=8080, help="port on 127.0.0.1 (default 8080)")
     board.set_defaults(handler=_dashboard)
     return parser
+
+
+def _model_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--effect",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="an effect of the model (repeatable; default: the study's [model] effects)",
+    )
+    parser.add_argument(
+        "--plugin",
+        action="append",
+        default=[],
+        metavar="MODULE",
+        help="import a module of your own effects first (repeatable)",
+    )
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    from ._calibrate import calibrate
+
+    if args.jobs < 1:
+        raise InputDataError(f"--jobs must be ≥ 1, got {args.jobs}")
+    if args.budget is not None and args.budget < 10:
+        raise InputDataError(f"--budget must be ≥ 10 solver runs, got {args.budget}")
+    result = calibrate(
+        args.study,
+        effects=args.effect,
+        plugins=args.plugin,
+        storage=args.storage,
+        max_solver_calls=args.budget,
+        jobs=args.jobs,
+        progress=not args.json,
+    )
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(result.message)
+    print("parameters: " + ", ".join(f"{k} = {v:.4g}" for k, v in result.params.items()))
+    print(
+        "RMSE per test [N]: " + ", ".join(f"{k} {v:.3g}" for k, v in result.rmse_per_test_n.items())
+    )
+    print(f"study {result.study!r} in {result.storage}")
+    return 0
+
+
+def _parse_params(text: str | None) -> dict[str, float] | None:
+    if text is None:
+        return None
+    params = {}
+    for pair in filter(None, text.split(",")):
+        key, sep, value = pair.partition("=")
+        try:
+            params[key.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep:
+            raise InputDataError(
+                f"--params {pair!r}: expected NAME=NUMBER[,NAME=NUMBER], e.g. ecoat_gpa=1.2"
+            )
+    return params
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from ._compare import compare
+
+    result = compare(
+        args.study,
+        params=_parse_params(args.params),
+        effects=args.effect,
+        plugins=args.plugin,
+        storage=args.storage,
+        output_dir=args.output,
+        plots=not args.no_plots,
+        progress=False,
+    )
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(result.message)
+    print(f"{'test':>8} {'RMSE [N]':>9} {'bias [N]':>9}")
+    for test in result.tests:
+        print(f"{test['test_id']:>8} {test['rmse_n']:9.4f} {test['bias_n']:+9.4f}")
+    for band in result.bands:
+        print(f"{band['band']:>14}: RMSE {band['rmse_n']:.4f} N over {band['points']} points")
+    if result.covariates:
+        print(
+            "correlation of the tests' mean residual with: "
+            + ", ".join(f"{k} {v:+.2f}" for k, v in result.covariates.items())
+        )
+    for path in result.plots:
+        print(f"plot: {path}")
+    return 0
 
 
 def _dashboard(args: argparse.Namespace) -> int:

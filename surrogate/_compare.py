@@ -1,0 +1,429 @@
+"""``compare``: measured against model curves, test by test, where the model fails.
+
+For the calibrated (or given) parameters, every test is simulated with the full
+solver at its own conditions (through the result cache). Residuals
+(measured − model) are summarised per test, per angle band and against every
+condition and covariate, and set against the noise level. Angle bands come
+from each test's model curve: the *elastic rise* below ``θsat − 10°``, the
+*transition* within ±10° of θsat, the *plateau* above ``θsat + 10°`` (a curve
+that never saturates has no plateau).
+
+Plots (PNG): the curves overlaid, the residual against angle, and each test's
+mean residual against each condition and covariate; the same figures are
+attached to the calibration's study for optuna-dashboard.
+"""
+
+from __future__ import annotations
+
+import sys
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import optuna
+
+from ._calibrate import (
+    CalibrationProblem,
+    _load,
+    _Runs,
+    calibration_study_name,
+    model_label,
+)
+from ._errors import InputDataError, SolverError
+from .physics import curve_features
+
+__all__ = ["CompareResult", "compare", "latest_calibration"]
+
+BAND_HALF_WIDTH_DEG = 10.0
+BANDS = ("elastic rise", "transition", "plateau")
+
+
+@dataclass(frozen=True)
+class CompareResult:
+    """Keys of ``surrogate compare --json``.
+
+    ``tests``: per test its conditions and covariates, RMSE and mean residual
+    (bias) [N]; ``bands``: RMSE per angle band; ``covariates``: for each
+    condition or covariate that varies between tests, the correlation of the
+    tests' mean residual with it; ``plots``: the PNG files written.
+    """
+
+    params: dict[str, float]
+    effects: list[str]
+    rmse_n: float
+    noise_n: float
+    rmse_over_noise: float
+    tests: list[dict[str, Any]]
+    bands: list[dict[str, Any]]
+    covariates: dict[str, float]
+    plots: list[str]
+    study: str
+    message: str
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def latest_calibration(storage: str, name: str) -> dict[str, Any] | None:
+    """The stored result of the calibration study ``name``, if any."""
+    try:
+        study = optuna.load_study(study_name=name, storage=storage)
+    except KeyError:
+        return None
+    return study.user_attrs.get("result")
+
+
+def compare(
+    study: Any,
+    *,
+    params: Mapping[str, float] | None = None,
+    effects: Sequence[str] | None = None,
+    plugins: Sequence[str] = (),
+    storage: str | None = None,
+    output_dir: str | Path | None = None,
+    plots: bool = True,
+    progress: bool = True,
+) -> CompareResult:
+    """Measured vs model curves for the calibrated (or given) parameters.
+
+    Parameters
+    ----------
+    study : path or StudySpec
+        A study with a ``[measurements]`` file.
+    params : mapping, optional
+        Parameter values (coating, ``effect.param``); default: the last
+        calibration of this model in the study's storage.
+    effects : sequence of str, optional
+        The model's effects; default: the study's ``[model] effects``.
+    output_dir : path, optional
+        Folder of the PNG plots; default ``<study folder>/<name>-compare``.
+    """
+    spec, data, chosen, noise = _load(study, effects, plugins)
+    problem = CalibrationProblem(spec, data, chosen)
+    url = storage or spec.default_storage()
+    name = calibration_study_name(spec, chosen)
+    theta = _parameters(problem, params, url, name)
+    runs = _Runs(problem, spec.directory / ".solver-cache", jobs=1)
+    G = len(problem.groups)
+    out = runs.run(np.repeat(theta[None, :], G, axis=0), list(range(G)))
+    if any(o is None for o in out):
+        raise SolverError(
+            f"the full solver failed at these parameters ({runs.failures[0]}); "
+            "compare needs a curve for every test"
+        )
+    curves = np.array([o["curve"] for o in out])  # type: ignore[index]
+    residual = problem.residuals(curves)
+    rmse = float(np.sqrt(np.mean(residual**2)))
+    tests = _per_test(problem, residual)
+    band = _bands(problem, curves)
+    bands = [
+        {
+            "band": label,
+            "rmse_n": float(np.sqrt(np.mean(residual[band == i] ** 2))),
+            "bias_n": float(np.mean(residual[band == i])),
+            "points": int(np.sum(band == i)),
+        }
+        for i, label in enumerate(BANDS)
+        if np.any(band == i)
+    ]
+    covariates = _covariate_correlations(problem, tests)
+    files: list[str] = []
+    if plots:
+        folder = Path(output_dir) if output_dir else spec.directory / f"{spec.name}-compare"
+        files = _plots(problem, curves, residual, tests, folder, chosen)
+    worst = max(tests, key=lambda t: t["rmse_n"])
+    message = (
+        f"{model_label(chosen)}: RMSE {rmse:.4g} N = {rmse / noise:.2f}× noise ({noise:.3g} N); "
+        f"worst test {worst['test_id']} ({worst['rmse_n']:.3g} N); "
+        + ", ".join(f"{b['band']} {b['rmse_n']:.3g} N" for b in bands)
+    )
+    result = CompareResult(
+        params=dict(zip(problem.space.names, map(float, theta), strict=True)),
+        effects=list(chosen),
+        rmse_n=rmse,
+        noise_n=noise,
+        rmse_over_noise=rmse / noise,
+        tests=tests,
+        bands=bands,
+        covariates=covariates,
+        plots=files,
+        study=name,
+        message=message,
+    )
+    _attach(url, name, problem, curves, residual, tests, result)
+    if progress:
+        print(f"[{name}] {message}", file=sys.stderr, flush=True)
+    return result
+
+
+def _parameters(
+    problem: CalibrationProblem, params: Mapping[str, float] | None, url: str, name: str
+) -> np.ndarray:
+    names = problem.space.names
+    if params is None:
+        stored = latest_calibration(url, name)
+        if stored is None:
+            raise InputDataError(
+                f"no calibration of model {name!r} in {url}; run `surrogate calibrate` "
+                "first or give --params"
+            )
+        params = stored["params"]
+    unknown = [k for k in params if k not in names]
+    missing = [k for k in names if k not in params]
+    if unknown or missing:
+        raise InputDataError(
+            f"--params must give exactly {', '.join(names)}; "
+            + (f"unknown {', '.join(unknown)}" if unknown else f"missing {', '.join(missing)}")
+        )
+    values = np.array([float(params[k]) for k in names])
+    for spec, value in zip(problem.space, values, strict=True):
+        if not np.isfinite(value) or not (spec.low <= value <= spec.high):
+            raise InputDataError(
+                f"--params {spec.name}={value:g} is outside its range [{spec.low:g}, {spec.high:g}]"
+            )
+    return values
+
+
+def _per_test(problem: CalibrationProblem, residual: np.ndarray) -> list[dict[str, Any]]:
+    rows = []
+    table = problem.data.tests.set_index("test_id")
+    extra = [*problem.data.conditions, *problem.data.covariates]
+    for index, test_id in enumerate(problem.test_ids):
+        r = residual[problem.point_test == index]
+        row: dict[str, Any] = {
+            "test_id": str(test_id),
+            "rmse_n": float(np.sqrt(np.mean(r**2))),
+            "bias_n": float(np.mean(r)),
+        }
+        for column in extra:
+            value = table.loc[test_id, column]
+            row[column] = value if isinstance(value, str) else float(value)
+        rows.append(row)
+    return rows
+
+
+def _bands(problem: CalibrationProblem, curves: np.ndarray) -> np.ndarray:
+    """Band index (0 rise, 1 transition, 2 plateau) of every measured point."""
+    theta_sat = np.array(
+        [
+            curve_features(problem.angle_deg, c).theta_sat_deg
+            if curve_features(problem.angle_deg, c).saturated
+            else np.inf
+            for c in curves
+        ]
+    )
+    at = theta_sat[problem.point_group]
+    angle = problem.point_angle_deg
+    band = np.ones(angle.size, dtype=int)
+    band[angle < at - BAND_HALF_WIDTH_DEG] = 0
+    band[angle > at + BAND_HALF_WIDTH_DEG] = 2
+    return band
+
+
+def _numeric(values: list[Any]) -> np.ndarray | None:
+    if all(isinstance(v, str) for v in values):
+        levels = sorted(set(values))
+        return np.array([levels.index(v) for v in values], dtype=float)
+    try:
+        return np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        return None
+
+
+def _covariate_correlations(
+    problem: CalibrationProblem, tests: list[dict[str, Any]]
+) -> dict[str, float]:
+    bias = np.array([t["bias_n"] for t in tests])
+    out = {}
+    for column in (*problem.data.conditions, *problem.data.covariates):
+        x = _numeric([t[column] for t in tests])
+        if x is None or np.ptp(x) == 0 or np.ptp(bias) == 0:
+            continue
+        out[column] = float(np.corrcoef(x, bias)[0, 1])
+    return out
+
+
+def _plots(
+    problem: CalibrationProblem,
+    curves: np.ndarray,
+    residual: np.ndarray,
+    tests: list[dict[str, Any]],
+    folder: Path,
+    effects: Sequence[str],
+) -> list[str]:
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as error:  # optional: pip install .[plots]
+        warnings.warn(f"PNG plots skipped ({error.name} is not installed)", stacklevel=3)
+        return []
+    folder.mkdir(parents=True, exist_ok=True)
+    label = model_label(effects)
+    files = []
+    colours = plt.get_cmap("tab10")
+
+    figure, axis = plt.subplots(figsize=(8, 5.5))
+    for index, test_id in enumerate(problem.test_ids):
+        mask = problem.point_test == index
+        colour = colours(index % 10)
+        axis.plot(problem.point_angle_deg[mask], problem.measured_n[mask], ".", ms=2, color=colour)
+        axis.plot(
+            problem.angle_deg,
+            curves[problem.test_group[index]],
+            "-",
+            color=colour,
+            lw=1.2,
+            label=str(test_id),
+        )
+    axis.set(
+        xlabel="fixture rotation [deg]",
+        ylabel="probe force [N]",
+        title=f"Measured (dots) and model (lines), model: {label}",
+    )
+    axis.legend(fontsize=7, ncol=2)
+    files.append(_save(figure, folder / f"curves-{label}.png"))
+
+    figure, axis = plt.subplots(figsize=(8, 4.5))
+    for index, test_id in enumerate(problem.test_ids):
+        mask = problem.point_test == index
+        axis.plot(
+            problem.point_angle_deg[mask],
+            residual[mask],
+            "-",
+            lw=0.8,
+            color=colours(index % 10),
+            label=str(test_id),
+        )
+    rmse = float(np.sqrt(np.mean(residual**2)))
+    axis.axhline(0.0, color="black", lw=0.8)
+    axis.set(
+        xlabel="fixture rotation [deg]",
+        ylabel="measured − model [N]",
+        title=f"Residual against angle, model: {label} (RMSE {rmse:.3g} N)",
+    )
+    axis.legend(fontsize=7, ncol=2)
+    files.append(_save(figure, folder / f"residual-angle-{label}.png"))
+
+    columns = [*problem.data.conditions, *problem.data.covariates]
+    if columns:
+        figure, axes = plt.subplots(1, len(columns), figsize=(3.2 * len(columns), 3.4))
+        axes = np.atleast_1d(axes)
+        bias = [t["bias_n"] for t in tests]
+        rms = [t["rmse_n"] for t in tests]
+        for axis, column in zip(axes, columns, strict=True):
+            values = [t[column] for t in tests]
+            axis.errorbar(values, bias, yerr=rms, fmt="o", ms=4, capsize=2)
+            if column == "rate_deg_s":
+                axis.set_xscale("log")
+            axis.axhline(0.0, color="black", lw=0.8)
+            axis.set(xlabel=column, ylabel="mean residual ± RMSE [N]")
+        figure.suptitle(f"Residual per test against conditions and covariates ({label})")
+        files.append(_save(figure, folder / f"residual-covariates-{label}.png"))
+    return files
+
+
+def _save(figure: Any, path: Path) -> str:
+    import matplotlib.pyplot as plt
+
+    figure.tight_layout()
+    tmp = path.with_suffix(".tmp.png")
+    figure.savefig(tmp, dpi=110)
+    plt.close(figure)
+    tmp.replace(path)
+    return str(path)
+
+
+def _attach(
+    url: str,
+    name: str,
+    problem: CalibrationProblem,
+    curves: np.ndarray,
+    residual: np.ndarray,
+    tests: list[dict[str, Any]],
+    result: CompareResult,
+) -> None:
+    """The same figures as plotly objects on the calibration study (optuna-dashboard)."""
+    try:
+        import plotly.graph_objects as go
+        from optuna_dashboard import save_note, save_plotly_graph_object
+    except ImportError:
+        return
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    study = optuna.create_study(study_name=name, storage=url, load_if_exists=True)
+    figure = go.Figure()
+    for index, test_id in enumerate(problem.test_ids):
+        mask = problem.point_test == index
+        figure.add_trace(
+            go.Scatter(
+                x=problem.point_angle_deg[mask],
+                y=problem.measured_n[mask],
+                mode="markers",
+                marker={"size": 3},
+                name=f"{test_id} measured",
+                legendgroup=str(test_id),
+            )
+        )
+        figure.add_trace(
+            go.Scatter(
+                x=problem.angle_deg,
+                y=curves[problem.test_group[index]],
+                mode="lines",
+                name=f"{test_id} model",
+                legendgroup=str(test_id),
+            )
+        )
+    figure.update_layout(
+        title="Measured and model curves",
+        xaxis_title="fixture rotation [deg]",
+        yaxis_title="probe force [N]",
+    )
+    save_plotly_graph_object(study, figure, graph_object_id="compare-curves")
+    figure = go.Figure()
+    for index, test_id in enumerate(problem.test_ids):
+        mask = problem.point_test == index
+        figure.add_trace(
+            go.Scatter(
+                x=problem.point_angle_deg[mask], y=residual[mask], mode="lines", name=str(test_id)
+            )
+        )
+    figure.update_layout(
+        title="Residual (measured − model) against angle",
+        xaxis_title="fixture rotation [deg]",
+        yaxis_title="residual [N]",
+    )
+    save_plotly_graph_object(study, figure, graph_object_id="compare-residual-angle")
+    columns = [*problem.data.conditions, *problem.data.covariates]
+    if columns:
+        figure = go.Figure()
+        for column in columns:
+            figure.add_trace(
+                go.Scatter(
+                    x=[t[column] for t in tests],
+                    y=[t["bias_n"] for t in tests],
+                    mode="markers",
+                    name=column,
+                    text=[t["test_id"] for t in tests],
+                )
+            )
+        figure.update_layout(
+            title="Mean residual per test against each condition and covariate",
+            yaxis_title="mean residual [N]",
+        )
+        save_plotly_graph_object(study, figure, graph_object_id="compare-residual-covariates")
+    lines = [
+        f"## Compare: {result.message}",
+        "",
+        "| test | RMSE [N] | bias [N] |",
+        "|---|---|---|",
+        *[f"| {t['test_id']} | {t['rmse_n']:.4g} | {t['bias_n']:+.4g} |" for t in tests],
+        "",
+        "| band | RMSE [N] | points |",
+        "|---|---|---|",
+        *[f"| {b['band']} | {b['rmse_n']:.4g} | {b['points']} |" for b in result.bands],
+    ]
+    save_note(study, "\n".join(lines))

@@ -1,0 +1,256 @@
+"""Calibration against measured curves, and the comparison of model and measurements.
+
+Data are made by the built-in solver with seeded noise (surrogate._synthetic);
+the truth is known to the test, never to the calibration.
+"""
+
+import json
+import textwrap
+
+import numpy as np
+import optuna
+import pytest
+
+import surrogate
+from surrogate._cli import main
+from surrogate._synthetic import synthetic_measurements
+from surrogate.physics import bending_stiffness, plastic_moment
+
+TRUTH = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
+NOISE = 0.05
+T = 1.2  # webbing thickness [mm]
+
+
+def _study(
+    tmp_path, tests, *, effects=None, hidden=None, seed=1, name="cal", budget=200, noise=None
+):
+    table = synthetic_measurements(tests, coating=TRUTH, effects=hidden, noise_n=NOISE, seed=seed)
+    table.to_csv(tmp_path / "tests.csv", index=False)
+    listed = ", ".join(f'"{e}"' for e in (effects or []))
+    (tmp_path / "study.toml").write_text(
+        textwrap.dedent(
+            f"""
+            [study]
+            name = "{name}"
+            [parameters]
+            ecoat_gpa = {{ low = 0.5,  high = 4.0, log = true }}
+            scoat_gpa = {{ low = 0.05, high = 0.4, log = true }}
+            tcoat_mm  = {{ low = 0.01, high = 0.1, log = true }}
+            [measurements]
+            file = "tests.csv"
+            {"" if noise is None else f"noise_n = {noise}"}
+            [model]
+            effects = [{listed}]
+            [budget]
+            calibration_solver_calls = {budget}
+            surrogate_trials = 100
+            """
+        )
+    )
+    return tmp_path / "study.toml"
+
+
+def _stiffness_and_moment(params):
+    e, s, t = (params[k] * f for k, f in (("ecoat_gpa", 1e3), ("scoat_gpa", 1e3), ("tcoat_mm", 1)))
+    return bending_stiffness(e, t, T), plastic_moment(s, t, T)
+
+
+BASE_TESTS = [
+    {"test_id": "a1", "tension_n": 0.0, "temperature_c": 21.0},
+    {"test_id": "a2", "tension_n": 0.0, "temperature_c": 24.0},
+    {"test_id": "b1", "tension_n": 20.0, "temperature_c": 22.5},
+    {"test_id": "b2", "tension_n": 20.0, "temperature_c": 23.0},
+]
+
+
+def test_base_model_on_base_data_recovers_the_identifiable_combination(tmp_path):
+    path = _study(tmp_path, BASE_TESTS)
+    result = surrogate.calibrate(path, progress=False)
+    # the noise comes from the two replicate pairs
+    assert result.noise_n == pytest.approx(NOISE, rel=0.15)
+    # RMSE ≈ noise: within 3 % of the RMSE of the truth itself on these noisy data
+    at_truth = surrogate.compare(path, params=TRUTH, plots=False, progress=False).rmse_n
+    assert result.rmse_n <= 1.03 * at_truth
+    assert at_truth == pytest.approx(NOISE, rel=0.1)
+    # the curve fixes D ∝ Ecoat·Tcoat and Mp ∝ Scoat·Tcoat, not the three values apart
+    d, mp = _stiffness_and_moment(result.params)
+    d0, mp0 = _stiffness_and_moment(TRUTH)
+    assert d == pytest.approx(d0, rel=0.03)
+    assert mp == pytest.approx(mp0, rel=0.03)
+    assert result.status == "converged"
+    assert 0 < result.solver_calls <= 200
+    assert result.effects == []
+    # the verifications are trials of the calibration study, value = verified RMSE
+    study = optuna.load_study(study_name=result.study, storage=result.storage)
+    values = [t.value for t in study.trials]
+    assert min(values) == pytest.approx(result.rmse_n)
+    assert study.user_attrs["result"]["params"] == result.params
+
+
+def test_the_right_effect_recovers_its_parameter(tmp_path):
+    hidden = {"tension": {"k_e": 0.006, "k_s": 0.006}}
+    tests = [
+        {"test_id": "t0a", "tension_n": 0.0},
+        {"test_id": "t0b", "tension_n": 0.0},
+        {"test_id": "t20", "tension_n": 20.0},
+        {"test_id": "t40", "tension_n": 40.0},
+    ]
+    base = surrogate.calibrate(_study(tmp_path, tests, hidden=hidden), progress=False)
+    assert base.rmse_n > 5 * base.noise_n  # the base model cannot follow the tension
+    path = _study(tmp_path, tests, hidden=hidden)
+    result = surrogate.calibrate(path, effects=["tension"], progress=False)
+    truth = {**TRUTH, "tension.k_e": 0.006, "tension.k_s": 0.006}
+    at_truth = surrogate.compare(
+        path, params=truth, effects=["tension"], plots=False, progress=False
+    ).rmse_n
+    assert result.rmse_n <= 1.03 * at_truth
+    # stated tolerance: kE and kS within 10 % of the truth
+    assert result.params["tension.k_e"] == pytest.approx(0.006, rel=0.10)
+    assert result.params["tension.k_s"] == pytest.approx(0.006, rel=0.10)
+    assert result.study.endswith("/calibrate/tension")
+
+
+def test_cli_calibrate_json_then_compare(tmp_path, capsys):
+    path = _study(tmp_path, BASE_TESTS[:2] + BASE_TESTS[2:3], budget=40)
+    assert main(["calibrate", str(path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert {"params", "rmse_n", "noise_n", "solver_calls", "effects"} <= set(out)
+    assert set(out["params"]) == {"ecoat_gpa", "scoat_gpa", "tcoat_mm"}
+    assert isinstance(out["solver_calls"], int) and out["solver_calls"] <= 40
+    assert out["effects"] == []
+
+    assert main(["compare", str(path), "--json", "--output", str(tmp_path / "plots")]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["params"] == out["params"]  # the stored calibration
+    assert report["rmse_n"] == pytest.approx(out["rmse_n"], rel=1e-9)
+    assert [t["test_id"] for t in report["tests"]] == ["a1", "a2", "b1"]
+    assert {b["band"] for b in report["bands"]} <= {"elastic rise", "transition", "plateau"}
+    assert sum(b["points"] for b in report["bands"]) == 3 * 91
+    assert len(report["plots"]) == 3
+    for png in report["plots"]:
+        assert open(png, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
+    # the same figures are attached to the calibration study for optuna-dashboard
+    study = optuna.load_study(study_name=out["study"], storage=out["storage"])
+    attrs = json.dumps(study._storage.get_study_system_attrs(study._study_id))
+    for figure in ("compare-curves", "compare-residual-angle", "compare-residual-covariates"):
+        assert figure in attrs
+
+
+def test_compare_shows_where_the_base_model_fails(tmp_path):
+    hidden = {"tension": {"k_e": 0.01, "k_s": 0.01}}
+    tests = [
+        {"test_id": "t0", "tension_n": 0.0, "temperature_c": 22.0},
+        {"test_id": "t20", "tension_n": 20.0, "temperature_c": 21.0},
+        {"test_id": "t40", "tension_n": 40.0, "temperature_c": 22.5},
+    ]
+    path = _study(tmp_path, tests, hidden=hidden, noise=NOISE)
+    # the truth's coating, no tension effect: the residual grows with the tension
+    report = surrogate.compare(path, params=TRUTH, plots=False, progress=False)
+    bias = {t["test_id"]: t["bias_n"] for t in report.tests}
+    assert abs(bias["t0"]) < 3 * NOISE
+    assert 0 < bias["t20"] < bias["t40"]
+    assert report.covariates["tension_n"] > 0.95
+    assert report.rmse_over_noise > 5
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--effect", "no_such_effect"], "unknown effect 'no_such_effect'"),
+        (["--plugin", "no_such_module_xyz"], "cannot import plug-in module"),
+        (["--budget", "3"], "--budget must be ≥ 10"),
+        (["--jobs", "0"], "--jobs must be ≥ 1"),
+    ],
+)
+def test_bad_calibrate_options_are_one_line_errors(tmp_path, capsys, args, message):
+    path = _study(tmp_path, BASE_TESTS[:2])
+    before = sorted(p.name for p in tmp_path.iterdir())
+    with pytest.raises(SystemExit) as exit_info:
+        main(["calibrate", str(path), *args])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # no storage, no cache
+
+
+BAD_FILES = {
+    "missing column": "test_id,angle_deg\na,0\na,1\na,2\n",
+    "nan force": "test_id,angle_deg,force_n\na,0,0\na,1,nan\na,2,1\n",
+    "negative force": "test_id,angle_deg,force_n\na,0,0\na,1,-1\na,2,1\n",
+    "duplicate angle": "test_id,angle_deg,force_n\na,0,0\na,1,1\na,1,1\n",
+    "unsorted": "test_id,angle_deg,force_n\na,0,0\na,2,1\na,1,1\n",
+    "unitless": "test_id,angle_deg,force_n,tension\na,0,0,1\na,1,1,1\na,2,1,1\n",
+    "direction": "test_id,angle_deg,force_n,direction\na,0,0,up\na,1,1,up\na,2,1,up\n",
+    "beyond the rig's range": "test_id,angle_deg,force_n\na,0,0\na,45,1\na,120,1\n",
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_FILES))
+def test_bad_measurement_files_are_refused_by_calibrate_and_compare(tmp_path, capsys, case):
+    path = _study(tmp_path, BASE_TESTS[:2])
+    (tmp_path / "tests.csv").write_text(BAD_FILES[case])
+    text = path.read_text().replace("[measurements]", "[measurements]\nnoise_n = 0.05")
+    path.write_text(text)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    for command in ("calibrate", "compare"):
+        with pytest.raises(SystemExit) as exit_info:
+            main([command, str(path)])
+        assert exit_info.value.code == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("surrogate: error:") and "\n" not in err
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_no_replicates_and_no_stated_noise_is_refused(tmp_path):
+    path = _study(tmp_path, BASE_TESTS[::2])  # one test per condition
+    with pytest.raises(surrogate.InputDataError, match="noise_n"):
+        surrogate.calibrate(path, progress=False)
+
+
+def test_compare_refuses_params_outside_the_ranges_or_incomplete(tmp_path):
+    path = _study(tmp_path, BASE_TESTS[:2])
+    with pytest.raises(surrogate.InputDataError, match="outside its range"):
+        surrogate.compare(path, params={**TRUTH, "ecoat_gpa": 40.0}, plots=False)
+    with pytest.raises(surrogate.InputDataError, match="missing tcoat_mm"):
+        surrogate.compare(path, params={"ecoat_gpa": 1.0, "scoat_gpa": 0.1}, plots=False)
+    with pytest.raises(surrogate.InputDataError, match="no calibration"):
+        surrogate.compare(path, plots=False)
+
+
+def test_model_state_surrogate_inputs_follow_the_effects(tmp_path):
+    """The surrogate sees what the solver sees: a tension effect is a stiffer coat."""
+    from surrogate._calibrate import CalibrationProblem, state_features
+    from surrogate._measurements import load_measurements
+    from surrogate._study import load_study
+
+    path = _study(tmp_path, BASE_TESTS)
+    spec = load_study(path)
+    problem = CalibrationProblem(spec, load_measurements(spec.measurements_file), ["tension"])
+    assert problem.conditions == ("tension_n",)  # temperature is no condition
+    assert len(problem.groups) == 2  # replicates share a run
+    theta = np.array([1.0, 0.1, 0.02, 0.01, 0.0])
+    at0, at20 = (state_features(problem.state(theta, g)) for g in (0, 1))
+    assert at20[0] - at0[0] == pytest.approx(np.log(1 + 0.01 * 20.0))  # log D grows
+    assert at20[1] == pytest.approx(at0[1])  # k_s = 0: the plastic moment does not
+
+
+def test_the_fast_mean_of_the_curve_surrogate_is_scikit_learns(tmp_path):
+    from surrogate._calibrate import CalibrationProblem, CurveSurrogate, _Runs
+    from surrogate._measurements import load_measurements
+    from surrogate._study import load_study
+
+    spec = load_study(_study(tmp_path, BASE_TESTS))
+    problem = CalibrationProblem(spec, load_measurements(spec.measurements_file), ["tension"])
+    runs = _Runs(problem, tmp_path / "cache", jobs=1)
+    X = problem.space.from_unit(np.random.default_rng(0).random((10, len(problem.space))))
+    runs.run(X, [i % 2 for i in range(10)])
+    model = CurveSurrogate(problem).fit(
+        np.array(runs.X), np.array(runs.groups), np.array(runs.curves)
+    )
+    fast = model.predict(X[:3])
+    slow, std = model.predict(X[:3], return_std=True)  # through GaussianProcessRegressor.predict
+    np.testing.assert_allclose(fast, slow, rtol=1e-10, atol=1e-12)
+    assert fast.shape == (3, 2, 91) and np.all(std >= 0)
+    # at a training point the surrogate reproduces the solver's curve
+    at = model.predict(np.array(runs.X[:1]))[0, runs.groups[0]]
+    np.testing.assert_allclose(at, runs.curves[0], rtol=2e-3, atol=2e-3)
