@@ -113,15 +113,21 @@ class CalibrationProblem:
                     ParameterSpec(f"{name}.{p.name}", p.low, p.high, log=p.log, unit=p.unit)
                 )
         self.space = ParameterSpace.of(specs)
-        self.conditions = tuple(c for c in CONDITIONS if c in data.conditions and c in reads)
+        self.reads = tuple(sorted(reads))
+        self.conditions = tuple(
+            c for c in (*CONDITIONS, *data.covariates) if c in reads and c in data.tests
+        )
         test_ids = list(data.tests.test_id) if tests is None else list(tests)
         self.test_ids = test_ids
         self.groups: list[dict[str, Any]] = []
         group_of: dict[tuple[Any, ...], int] = {}
         self.test_group: list[int] = []
+        table = data.tests.set_index("test_id")
         for test_id in test_ids:
-            full = data.conditions_of(test_id)
-            conditions = {c: full[c] for c in self.conditions}
+            row = table.loc[test_id]
+            conditions = {
+                c: row[c] if isinstance(row[c], str) else float(row[c]) for c in self.conditions
+            }
             key = tuple(conditions[c] for c in self.conditions)
             if key not in group_of:
                 group_of[key] = len(self.groups)
@@ -162,6 +168,9 @@ class CalibrationProblem:
                 column = np.array([v == "weft" for v in values], dtype=float)
             elif name == "rate_deg_s":
                 column = np.log(np.asarray(values, dtype=float))
+            elif all(isinstance(v, str) for v in values):  # a plug-in's text column
+                levels = sorted(set(values))
+                column = np.array([levels.index(v) for v in values], dtype=float)
             else:
                 column = np.asarray(values, dtype=float)
             span = column.max() - column.min()
@@ -189,7 +198,7 @@ class CalibrationProblem:
     def state(self, theta: np.ndarray, group: int) -> ModelState:
         """The model state the solver sees for parameter vector ``theta`` at a group."""
         coating, effects = self.split(dict(zip(self.space.names, theta, strict=True)))
-        conditions = check_conditions(self.groups[group])
+        conditions = check_conditions(self.groups[group], read_by_effects=self.reads)
         state = coating_state(
             coating["ecoat_gpa"],
             coating["scoat_gpa"],

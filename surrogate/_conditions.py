@@ -7,7 +7,7 @@ weft) and ``rate_deg_s`` are read by effects. One place for their checks.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 from ._errors import InputDataError
@@ -25,12 +25,25 @@ _RIG_FIELDS = {
 }
 
 
-def check_conditions(conditions: Mapping[str, Any] | None) -> dict[str, Any]:
-    """Validated conditions; an unknown name or a bad value is an InputDataError."""
+def check_conditions(
+    conditions: Mapping[str, Any] | None, *, read_by_effects: Iterable[str] = ()
+) -> dict[str, Any]:
+    """Validated conditions; an unknown name or a bad value is an InputDataError.
+
+    Besides the known conditions, a column that an enabled effect declares in
+    its ``reads`` (e.g. a plug-in's ``temperature_c``) passes through as it is.
+    """
     checked: dict[str, Any] = {}
+    extra = set(read_by_effects) - set(CONDITIONS)
     for name, value in (conditions or {}).items():
+        if name in extra:
+            checked[name] = value
+            continue
         if name not in CONDITIONS:
-            raise InputDataError(f"unknown test condition {name!r}; known: {', '.join(CONDITIONS)}")
+            raise InputDataError(
+                f"unknown test condition {name!r}; known: {', '.join(CONDITIONS)} "
+                "(or a column an enabled effect reads)"
+            )
         if name == "direction":
             if value not in DIRECTIONS:
                 raise InputDataError(f"direction must be warp or weft, got {value!r}")

@@ -113,11 +113,13 @@ def simulate(
         The solver did not converge (the message names the angle).
     """
     rig = Rig() if rig is None else rig
-    checked = check_conditions(conditions)
+    enabled = {name: get_effect(name) for name in (effects or {})}
+    reads = [column for effect in enabled.values() for column in effect.reads]
+    checked = check_conditions(conditions, read_by_effects=reads)
     rig = rig_for(rig, checked)
     state = coating_state(ecoat_gpa, scoat_gpa, tcoat_mm, rig)
     for name, values in (effects or {}).items():
-        effect = get_effect(name)
+        effect = enabled[name]
         state = effect.apply(state, effect.resolve(values), checked)
     rig = state.rig
     ratio = state.hardening_ratio

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import os
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -150,6 +152,9 @@ def load_plugin(module: str) -> None:
         raise InputDataError(
             f"--plugin takes a Python module name such as my_effects, got {module!r}"
         )
+    here = os.getcwd()
+    if here not in sys.path:  # "in the working folder", as the message below says
+        sys.path.append(here)
     try:
         importlib.import_module(module)
     except ImportError as error:
