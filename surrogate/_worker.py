@@ -301,7 +301,10 @@ class _Worker:
         self, spec: StudySpec, storage: str, *, heartbeat_s: int, solve: Solve, progress: bool
     ) -> None:
         self.url = storage
-        self.storage = open_storage(storage, heartbeat_s=heartbeat_s, must_exist=True)
+        # get_storage: the study and this worker share one (cached) storage object
+        self.storage = optuna.storages.get_storage(
+            open_storage(storage, heartbeat_s=heartbeat_s, must_exist=True)
+        )
         with storage_errors(storage):
             try:
                 self.study = optuna.load_study(
@@ -331,7 +334,7 @@ class _Worker:
         self._stop: str | None = None
 
     def close(self) -> None:
-        engine = getattr(self.storage, "engine", None)
+        engine = getattr(getattr(self.storage, "_backend", self.storage), "engine", None)
         if engine is not None:
             engine.dispose()
 
@@ -511,5 +514,6 @@ def _as_planned(spec: StudySpec, attrs: Mapping[str, Any]) -> StudySpec:
 
 def open_planner_study(spec: StudySpec, storage: str, *, heartbeat_s: int | None) -> optuna.Study:
     """The verify study for a planner (created if new), on a heartbeat-aware storage."""
+    _quiet_optuna()
     with storage_errors(storage):
         return _open_study(spec, open_storage(storage, heartbeat_s=heartbeat_s))
