@@ -148,7 +148,10 @@ def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool =
             Path(url.removeprefix("sqlite:///")) if url.startswith("sqlite:///") else None
         )
         if local is not None and not local.exists():
-            raise InputDataError(f"no storage at {local} yet; plan the study first")
+            raise InputDataError(
+                f"no storage at {local} yet; plan the study first "
+                "(surrogate run STUDY --storage URL --jobs 0)"
+            )
     with storage_errors(url):
         if path is not None:
             return _HeartbeatJournalStorage(

@@ -42,15 +42,11 @@ def postgres_server():
     if os.geteuid() == 0:
         os.chown(folder, user.pw_uid, user.pw_gid)
     port = free_port()
-    run = (
-        lambda *args: subprocess.run(  # noqa: E731
-            _as_server_user([str(bindir / args[0]), *args[1:]]),
-            check=True,
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
-    )
+
+    def run(*args: str) -> None:
+        command = _as_server_user([str(bindir / args[0]), *args[1:]])
+        subprocess.run(command, check=True, capture_output=True, text=True, timeout=120)
+
     try:
         run("initdb", "-D", str(data), "-U", "surrogate", "-A", "trust", "-E", "UTF8", "--no-sync")
         options = (
@@ -66,7 +62,7 @@ def postgres_server():
         yield f"postgresql://surrogate@127.0.0.1:{port}"
     finally:
         subprocess.run(
-            _as_server_user([str(bindir / "pg_ctl"), "-D", str(data), "-m", "fast", "stop"]),
+            _as_server_user([str(bindir / "pg_ctl"), "-D", str(data), "-m", "immediate", "stop"]),
             capture_output=True,
             timeout=60,
         )
