@@ -22,6 +22,7 @@ within the grace period).
 from __future__ import annotations
 
 import contextlib
+import errno
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -144,9 +145,8 @@ def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool =
         retry = RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)
     path = journal_path(url)
     if must_exist:
-        local = path or (
-            Path(url.removeprefix("sqlite:///")) if url.startswith("sqlite:///") else None
-        )
+        sqlite_file = url.removeprefix("sqlite:///").split("?")[0].removeprefix("file:")
+        local = path or (Path(sqlite_file) if url.startswith("sqlite:///") else None)
         if local is not None and not local.exists():
             raise InputDataError(
                 f"no storage at {local} yet; plan the study first "
@@ -236,6 +236,8 @@ def storage_error_message(error: BaseException, url: str | None = None) -> str |
     import sqlalchemy.exc
 
     where = f" ({_redacted(url)})" if url else ""
+    if isinstance(error, optuna.exceptions.StorageInternalError) and error.__cause__:
+        error = error.__cause__  # Optuna wraps the database's own error
     if isinstance(error, sqlalchemy.exc.SQLAlchemyError):
         detail = str(getattr(error, "orig", None) or error).strip().splitlines()
         text = detail[0] if detail else type(error).__name__
@@ -248,8 +250,9 @@ def storage_error_message(error: BaseException, url: str | None = None) -> str |
     if isinstance(error, OSError):
         reason = error.strerror or str(error)
         name = f": {error.filename}" if error.filename else ""
-        fix = "free space" if error.errno == 28 else "check the path and its permissions"
-        return f"cannot write the storage{where}: {reason}{name}; {fix}"
+        if error.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
+            return f"the storage{where} is full ({reason}); free space or use another storage"
+        return f"cannot write the storage{where}: {reason}{name}; check the path and permissions"
     if isinstance(error, ImportError):
         return f"the storage driver is missing ({error.name}); pip install 'psycopg[binary]'"
     return None
