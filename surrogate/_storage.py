@@ -119,6 +119,15 @@ def journal_path(url: str) -> Path | None:
     return Path(url.removeprefix("journal://")) if url.startswith("journal://") else None
 
 
+def missing_local_storage(url: str) -> Path | None:
+    """The SQLite or journal file of ``url`` if it does not exist yet, else None."""
+    url = normalise_storage_url(url)
+    local = journal_path(url)
+    if url.startswith("sqlite:///"):
+        local = Path(url.removeprefix("sqlite:///").split("?")[0].removeprefix("file:"))
+    return local if local is not None and not local.exists() else None
+
+
 def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool = False) -> Any:
     """An Optuna storage for ``url`` with heartbeats every ``heartbeat_s`` seconds.
 
@@ -145,9 +154,8 @@ def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool =
         retry = RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)
     path = journal_path(url)
     if must_exist:
-        sqlite_file = url.removeprefix("sqlite:///").split("?")[0].removeprefix("file:")
-        local = path or (Path(sqlite_file) if url.startswith("sqlite:///") else None)
-        if local is not None and not local.exists():
+        local = missing_local_storage(url)
+        if local is not None:
             raise InputDataError(
                 f"no storage at {local} yet; plan the study first "
                 "(surrogate run STUDY --storage URL --jobs 0)"

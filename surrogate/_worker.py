@@ -154,10 +154,11 @@ class WorkerDispatcher:
     ) -> dict[str, dict[str, Any]]:
         keys = enqueue_points(study, self.spec, points, phase=phase)
         if self.jobs > 0:
-            work(
+            todo = len(set(keys) - set(finished_records(study, keys)))
+            work(  # one point: this process, no start-up cost
                 self.spec,
                 storage=self.storage,
-                jobs=self.jobs,
+                jobs=max(1, min(self.jobs, todo)),
                 heartbeat_s=self.heartbeat_s,
                 idle_timeout_s=0.0,
                 solve=self.solve,
@@ -242,7 +243,10 @@ def _work_in_processes(
     progress: bool,
 ) -> dict[str, Any]:
     """``jobs`` worker processes; SIGTERM to this one is passed on to them."""
-    context = multiprocessing.get_context("spawn")
+    # forkserver: a clean process (no inherited database connections) that has
+    # imported the package once; each worker forks from it in milliseconds
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(["surrogate._worker"])
     results = context.SimpleQueue()
     processes = [
         context.Process(
