@@ -306,7 +306,7 @@ class _Worker:
     ) -> None:
         self.url = storage
         # get_storage: the study and this worker share one (cached) storage object
-        self.storage = optuna.storages.get_storage(
+        self.storage: Any = optuna.storages.get_storage(
             open_storage(storage, heartbeat_s=heartbeat_s, must_exist=True)
         )
         with storage_errors(storage):
@@ -344,7 +344,8 @@ class _Worker:
 
     def loop(self, idle_timeout_s: float) -> dict[str, Any]:
         """Work until the queue is empty, nothing runs, and ``idle_timeout_s`` passed."""
-        previous = {sig: signal.signal(sig, self._on_signal) for sig in _SIGNALS}
+        main_thread = threading.current_thread() is threading.main_thread()
+        previous = {sig: signal.signal(sig, self._on_signal) for sig in _SIGNALS if main_thread}
         try:
             with storage_errors(self.url):
                 idle_since = time.monotonic()
@@ -441,8 +442,11 @@ class _Worker:
         """FAIL the interrupted trial after queueing its copy (as a stale trial's)."""
         frozen = self.storage.get_trial(trial._trial_id)
         RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)(self.study, frozen)
-        self.storage.set_trial_system_attr(trial._trial_id, "interrupted", self._stop)
-        self.study.tell(trial, state=TrialState.FAIL)
+        try:
+            self.storage.set_trial_system_attr(trial._trial_id, "interrupted", self._stop)
+            self.study.tell(trial, state=TrialState.FAIL)
+        except optuna.exceptions.UpdateFinishedTrialError:
+            pass  # judged stale meanwhile: failed and queued again already
         if self.progress:
             print(
                 f"[{self.spec.name}] trial {trial.number}: stopped by {self._stop}; "
