@@ -94,7 +94,7 @@ def throwaway_postgres() -> Iterator[str]:
 
     def run(*args: str) -> None:
         command = _as_server_user([str(bindir / args[0]), *args[1:]])
-        subprocess.run(command, check=True, capture_output=True, text=True, timeout=120)
+        subprocess.run(command, check=True, capture_output=True, text=True, timeout=120, cwd=folder)
 
     try:
         run("initdb", "-D", str(data), "-U", "surrogate", "-A", "trust", "-E", "UTF8", "--no-sync")
