@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -144,6 +145,13 @@ def _build_parser() -> argparse.ArgumentParser:
     running.add_argument("--seed", type=int, help="override [study] seed")
     running.add_argument("--target", type=_target, help="override the target: f60_n=VALUE")
     running.add_argument("--budget", type=int, help="override [budget] max_solver_calls")
+    running.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="N local worker processes verify through the storage (journal or PostgreSQL); "
+        "0: queue the runs for `surrogate worker` processes elsewhere (default 1)",
+    )
     running.add_argument("--json", action="store_true", help="print one JSON object")
     running.set_defaults(handler=_run)
 
@@ -181,6 +189,7 @@ def _build_parser() -> argparse.ArgumentParser:
     board.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
     board.add_argument("--port", type=int, default=8080, help="port on 127.0.0.1 (default 8080)")
     board.set_defaults(handler=_dashboard)
+    _worker_parser(commands)
     return parser
 
 
@@ -278,6 +287,54 @@ def _compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _worker_parser(commands: Any) -> None:
+    worker = commands.add_parser(
+        "worker", help="run queued verification trials of a study from a shared storage"
+    )
+    worker.add_argument("study", type=Path, help="the planner's study file")
+    worker.add_argument(
+        "--storage",
+        required=True,
+        help="postgresql://user@host/db, journal:///path/study.log (or a .log path), "
+        "or sqlite:///path.db (one worker only)",
+    )
+    worker.add_argument("--jobs", type=int, default=1, help="worker processes here (default 1)")
+    worker.add_argument(
+        "--heartbeat", type=int, default=10, help="heartbeat interval in s (default 10)"
+    )
+    worker.add_argument(
+        "--idle-timeout",
+        type=float,
+        default=60.0,
+        help="s to wait for new trials once none is queued or running (default 60)",
+    )
+    worker.add_argument("--json", action="store_true", help="print one JSON object")
+    worker.set_defaults(handler=_worker)
+
+
+def _worker(args: argparse.Namespace) -> int:
+    from ._worker import work
+
+    result = work(
+        args.study,
+        storage=args.storage,
+        jobs=args.jobs,
+        heartbeat_s=args.heartbeat,
+        idle_timeout_s=args.idle_timeout,
+        progress=not args.json,
+    )
+    if args.json:
+        _print_json(result.to_json())
+    else:
+        print(
+            f"{result.runs} runs finished ({result.ok} ok, {result.failed} failed, "
+            f"{result.solved} solved, the rest from the cache) in {result.study!r}"
+        )
+    if result.interrupted in ("SIGTERM", "SIGINT"):
+        return 128 + int(getattr(signal, result.interrupted))
+    return 0
+
+
 def _dashboard(args: argparse.Namespace) -> int:
     from ._serve import dashboard
 
@@ -307,6 +364,7 @@ def _run(args: argparse.Namespace) -> int:
         seed=args.seed,
         target=args.target,
         budget=args.budget,
+        jobs=args.jobs,
         progress=not args.json,
     )
     if args.json:
@@ -483,6 +541,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         _fail(f"solver error: {error}", EXIT_SOLVER)
     except OSError as error:
         _fail(f"error: {error.strerror or error}: {error.filename}", EXIT_USAGE)
+    except Exception as error:
+        from ._storage import storage_error_message
+
+        message = storage_error_message(error)
+        if message is None:
+            raise
+        _fail(f"error: {message}", EXIT_USAGE)
     return 0
 
 

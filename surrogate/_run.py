@@ -13,6 +13,7 @@ import dataclasses
 import logging
 import sys
 import warnings
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -30,10 +31,11 @@ from ._errors import InputDataError
 from ._identifiability import assess_identifiability
 from ._objective import constraint_values, is_feasible, meets_target, relative_misfit
 from ._samples import SampleSet
+from ._storage import check_workers
 from ._study import StudySpec, Targets, load_study
 from ._surrogate_commands import fit_surrogate
 
-__all__ = ["RunResult", "run", "verify_study_name"]
+__all__ = ["RunResult", "run", "tell_verification", "verify_study_name"]
 
 METRIC = "f60_relative_misfit"
 THETA_MARGIN_SIGMA = 1.645  # one-sided 95 % margin on the predicted θsat
@@ -88,6 +90,7 @@ def run(
     seed: int | None = None,
     target: float | None = None,
     budget: int | None = None,
+    jobs: int = 1,
     progress: bool = True,
 ) -> RunResult:
     """Find coating parameters that meet the study's F60 target.
@@ -101,13 +104,25 @@ def run(
     seed, target, budget : optional
         Overrides of ``[study] seed``, ``[targets] f60_n`` and
         ``[budget] max_solver_calls``.
+    jobs : int
+        1: solve in this process. N > 1: N local worker processes verify each
+        batch through the storage (not SQLite); 0: queue each batch and wait for
+        ``surrogate worker`` processes elsewhere.
     progress : bool
         Report each iteration on stderr.
     """
+    from ._worker import HEARTBEAT_S, WorkerDispatcher, open_planner_study
+
     spec = _with_overrides(study, seed=seed, target=target, budget=budget)
     storage_url = storage or spec.default_storage()
+    check_workers(storage_url, jobs)
     _quiet_optuna()
-    verifier = _Verifier(spec, _open_study(spec, storage_url), progress=progress)
+    heartbeat_s = None if jobs == 1 else HEARTBEAT_S
+    verifier = _Verifier(
+        spec, open_planner_study(spec, storage_url, heartbeat_s=heartbeat_s), progress=progress
+    )
+    if jobs != 1:
+        verifier.dispatch = WorkerDispatcher(spec, storage_url, jobs=jobs, progress=progress)
     initial = make_design("lhs", spec.space, n=spec.budget.initial_samples, seed=spec.seed)
     verifier.verify(initial[list(spec.space.names)].to_numpy(), phase="initial design")
     iteration, last_model = 0, None
@@ -207,11 +222,14 @@ class _Verifier:
         self.names = list(spec.space.names)
         self.distributions = _distributions(spec)
         self.records: dict[str, dict[str, Any]] = {}
+        # set by run(jobs != 1): verify batches through the storage's workers
+        self.dispatch: Callable[[optuna.Study, list[dict[str, float]], str], dict] | None = None
         for trial in study.get_trials(
             deepcopy=False, states=(optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.FAIL)
         ):
             key = trial.user_attrs.get("input_hash")
-            if key is not None:
+            # a FAIL without a reason is an interrupted worker's run; its retry counts
+            if key is not None and (trial.values or "reason" in trial.user_attrs):
                 self.records[key] = _record_of(trial)
 
     @property
@@ -222,6 +240,12 @@ class _Verifier:
         return np.array([[r["params"][n] for n in self.names] for r in self.records.values()])
 
     def verify(self, points: np.ndarray, *, phase: str) -> None:
+        if self.dispatch is not None:
+            room = self.spec.budget.max_solver_calls - self.calls
+            batch = [
+                dict(zip(self.names, map(float, p), strict=True)) for p in np.atleast_2d(points)
+            ]
+            self.records.update(self.dispatch(self.study, batch[: max(room, 0)], phase))
         for point in np.atleast_2d(points):
             if self.calls >= self.spec.budget.max_solver_calls:
                 return
@@ -235,41 +259,7 @@ class _Verifier:
         trial = self.study.ask(self.distributions)
         trial.set_user_attr("input_hash", key)
         trial.set_user_attr("phase", phase)
-        if result["status"] != "ok":
-            trial.set_user_attr("reason", result["reason"])
-            self.study.tell(trial, state=optuna.trial.TrialState.FAIL)
-            return {"params": params, "status": "failed", "reason": result["reason"]}
-        misfit = relative_misfit(result["f60_n"], _target_of(self.spec))
-        constraints = constraint_values(params, result["theta_sat_deg"], self.spec)
-        for name, value in constraints.items():
-            trial.set_constraint(name, value)
-        # optuna-dashboard 0.21 reads only the older list format.
-        trial.storage.set_trial_system_attr(
-            trial._trial_id, "constraints", list(constraints.values())
-        )
-        for name, value in {
-            "f60_n": result["f60_n"],
-            "theta_sat_deg": result["theta_sat_deg"],
-            "saturated": result["saturated"],
-            "constraints": constraints,
-            "feasible": is_feasible(constraints),
-            "curve_angle_deg": result["angle_deg"],
-            "curve_force_n": [round(f, 6) for f in result["force_n"]],
-        }.items():
-            trial.set_user_attr(name, value)
-        self.study.tell(trial, misfit)
-        return {
-            "params": params,
-            "status": "ok",
-            "f60_n": result["f60_n"],
-            "theta_sat_deg": result["theta_sat_deg"],
-            "saturated": result["saturated"],
-            "misfit": misfit,
-            "constraints": constraints,
-            "number": trial.number,
-            "angle_deg": result["angle_deg"],
-            "force_n": result["force_n"],
-        }
+        return tell_verification(self.study, trial, self.spec, params, result)
 
     def sensitivities(self, point: dict[str, Any]) -> np.ndarray | None:
         """``∂ log F60 / ∂ log p`` at a verified point, by forward differences of
@@ -293,6 +283,8 @@ class _Verifier:
         """One full-solver run as a trial; a finished run is never repeated."""
         inputs = solver_inputs(params, self.spec.rig, solver=self.spec.solver)
         key = input_hash(inputs)
+        if key not in self.records and self.dispatch is not None:
+            self.records.update(self.dispatch(self.study, [params], phase))
         if key not in self.records:
             result = self.cache.get(key)
             if result is None:
@@ -368,6 +360,54 @@ class _Verifier:
             file=sys.stderr,
             flush=True,
         )
+
+
+def tell_verification(
+    study: optuna.Study,
+    trial: optuna.Trial,
+    spec: StudySpec,
+    params: dict[str, float],
+    result: dict[str, Any],
+) -> dict[str, Any]:
+    """Finish ``trial`` with one full-solver ``result``; return the verifier's record.
+
+    A failed run is a FAIL trial with its ``reason``; a successful one carries
+    the misfit as value, the constraints (Optuna 5 and the list that
+    optuna-dashboard 0.21 reads), F60, θsat and the curve.
+    """
+    if result["status"] != "ok":
+        trial.set_user_attr("reason", result["reason"])
+        study.tell(trial, state=optuna.trial.TrialState.FAIL)
+        return {"params": params, "status": "failed", "reason": result["reason"]}
+    misfit = relative_misfit(result["f60_n"], _target_of(spec))
+    constraints = constraint_values(params, result["theta_sat_deg"], spec)
+    for name, value in constraints.items():
+        trial.set_constraint(name, value)
+    # optuna-dashboard 0.21 reads only the older list format.
+    trial.storage.set_trial_system_attr(trial._trial_id, "constraints", list(constraints.values()))
+    for name, value in {
+        "f60_n": result["f60_n"],
+        "theta_sat_deg": result["theta_sat_deg"],
+        "saturated": result["saturated"],
+        "constraints": constraints,
+        "feasible": is_feasible(constraints),
+        "curve_angle_deg": result["angle_deg"],
+        "curve_force_n": [round(f, 6) for f in result["force_n"]],
+    }.items():
+        trial.set_user_attr(name, value)
+    study.tell(trial, misfit)
+    return {
+        "params": params,
+        "status": "ok",
+        "f60_n": result["f60_n"],
+        "theta_sat_deg": result["theta_sat_deg"],
+        "saturated": result["saturated"],
+        "misfit": misfit,
+        "constraints": constraints,
+        "number": trial.number,
+        "angle_deg": result["angle_deg"],
+        "force_n": result["force_n"],
+    }
 
 
 def _record_of(trial: optuna.trial.FrozenTrial) -> dict[str, Any]:

@@ -159,7 +159,7 @@ def _check_numeric(table: pd.DataFrame, names: tuple[str, ...] | list[str], path
             row = int(np.argmax(bad)) + 2  # 1-based, after the header line
             raise InputDataError(
                 f"{path}: column {name} has a missing, NaN or non-numeric "
-                f"value at line {row} ({table[name].iloc[row - 2]!r}); fix it"
+                f"value at line {row} ({str(table[name].iloc[row - 2])!r}); fix it"
             )
         if name.endswith(("_gpa", "_mm")) and np.any(values <= 0.0):
             row = int(np.argmax(values <= 0.0)) + 2

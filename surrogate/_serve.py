@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ._errors import InputDataError
+from ._storage import missing_local_storage, open_storage
 from ._study import StudySpec, load_study
 
 __all__ = ["dashboard"]
@@ -20,8 +21,9 @@ def dashboard(
     if not 1024 <= port <= 65535:
         raise InputDataError(f"--port must be in [1024, 65535], got {port}")
     url = storage or spec.default_storage()
-    if url.startswith("sqlite:///") and not Path(url.removeprefix("sqlite:///")).exists():
+    if missing_local_storage(url) is not None:  # nothing is created where none is yet
         raise InputDataError(f"no storage at {url} yet; run `surrogate run {spec.path}` first")
+    opened = open_storage(url)  # a journal file works too
     try:
         from optuna_dashboard import run_server
     except ImportError:
@@ -29,4 +31,4 @@ def dashboard(
             "optuna-dashboard is not installed; pip install 'webbing-surrogate[dashboard]'"
         ) from None
     print(f"optuna-dashboard for {url} on http://{HOST}:{port}/ (Ctrl-C to stop)", flush=True)
-    run_server(url, host=HOST, port=port)
+    run_server(opened, host=HOST, port=port)

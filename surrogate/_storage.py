@@ -1,0 +1,296 @@
+"""Optuna storages for many workers: URLs, heartbeats, and one-line storage errors.
+
+Accepted storage URLs:
+
+- ``postgresql://user@host:port/db`` (also ``postgres://``; run with psycopg 3,
+  i.e. ``postgresql+psycopg://``) — many machines;
+- ``journal:///path/to/study.log`` or a plain path ending in ``.log`` — Optuna's
+  journal file (``JournalFileBackend``), one machine or a shared NFS folder;
+- ``sqlite:///path.db`` — one worker only: SQLite hands the same enqueued trial
+  to two workers (a race in ``study.ask``), so more than one is refused;
+- any other SQLAlchemy URL Optuna's ``RDBStorage`` accepts (``mysql+pymysql://``).
+
+Workers keep a heartbeat on their running trial; a trial whose heartbeat is
+older than the grace period is failed by the next worker that looks, and
+:class:`optuna.storages.RetryHeartbeatStaleTrialCallback` queues a copy of it
+(``WAITING``) that another worker runs. ``RDBStorage`` has this built in; the
+journal gets the same through :class:`_HeartbeatJournalStorage`, whose heartbeat
+is a trial system attribute (clocks of the machines sharing it must agree to
+within the grace period).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import optuna
+from optuna.storages import (
+    JournalStorage,
+    RDBStorage,
+    RetryHeartbeatStaleTrialCallback,
+)
+from optuna.storages._heartbeat import BaseHeartbeat
+from optuna.storages.journal import JournalFileBackend
+from optuna.trial import FrozenTrial, TrialState
+
+from ._errors import InputDataError
+
+__all__ = [
+    "StorageError",
+    "check_workers",
+    "normalise_storage_url",
+    "open_storage",
+    "storage_error_message",
+    "storage_kind",
+]
+
+HEARTBEAT_ATTR = "surrogate:heartbeat"
+MAX_RETRY = 3  # a trial whose worker dies three times in a row is left FAIL
+
+
+class StorageError(InputDataError):
+    """The storage cannot be opened or written (unreachable, read-only, full)."""
+
+
+def normalise_storage_url(url: str) -> str:
+    """The URL Optuna/SQLAlchemy understands; refuse what none of the forms match.
+
+    ``postgres://`` and ``postgresql://`` get the psycopg 3 driver; a ``.log``
+    path becomes ``journal:///<absolute path>``.
+    """
+    if not isinstance(url, str) or not url.strip():
+        raise InputDataError(f"--storage must be a storage URL, got {url!r}")
+    url = url.strip()
+    for prefix in ("postgres://", "postgresql://"):
+        if url.startswith(prefix):
+            return "postgresql+psycopg://" + url.removeprefix(prefix)
+    if url.startswith("journal:"):
+        path = url.removeprefix("journal:").removeprefix("//")
+        if not path or path.endswith("/"):
+            raise InputDataError(
+                f"--storage {url!r}: a journal URL names a file, e.g. journal:///srv/study.log"
+            )
+        return f"journal://{Path(path).resolve()}"
+    if "://" not in url:
+        if url.endswith(".log"):
+            return f"journal://{Path(url).resolve()}"
+        raise InputDataError(
+            f"--storage {url!r} is not a storage URL; use postgresql://user@host/db, "
+            "journal:///path/study.log (or a .log path) or sqlite:///path.db"
+        )
+    scheme = url.split("://", 1)[0]
+    if scheme.split("+", 1)[0] not in ("sqlite", "postgresql", "mysql", "mariadb", "oracle"):
+        raise InputDataError(
+            f"--storage {url!r}: unknown scheme {scheme!r}; use postgresql://, "
+            "journal:///path.log or sqlite:///path.db"
+        )
+    return url
+
+
+def storage_kind(url: str) -> str:
+    """``sqlite``, ``postgresql``, ``journal`` or ``rdb`` (another SQL database)."""
+    url = normalise_storage_url(url)
+    for kind in ("sqlite", "postgresql", "journal"):
+        if url.startswith(kind):
+            return kind
+    return "rdb"
+
+
+def check_workers(url: str, workers: int) -> None:
+    """Refuse more than one worker on SQLite (one line, with the fix)."""
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
+        raise InputDataError(f"--jobs must be a whole number ≥ 0, got {workers!r}")
+    if workers > 1 and storage_kind(url) == "sqlite":
+        raise InputDataError(
+            f"--jobs {workers} on SQLite: SQLite hands the same queued trial to two workers; "
+            "use --storage journal:///path/study.log (one machine) or "
+            "--storage postgresql://user@host/db (many machines), or --jobs 1"
+        )
+
+
+def journal_path(url: str) -> Path | None:
+    """The journal file of a journal URL, else None."""
+    url = normalise_storage_url(url)
+    return Path(url.removeprefix("journal://")) if url.startswith("journal://") else None
+
+
+def missing_local_storage(url: str) -> Path | None:
+    """The SQLite or journal file of ``url`` if it does not exist yet, else None."""
+    url = normalise_storage_url(url)
+    local = journal_path(url)
+    if url.startswith("sqlite:///"):
+        local = Path(url.removeprefix("sqlite:///").split("?")[0].removeprefix("file:"))
+    return local if local is not None and not local.exists() else None
+
+
+def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool = False) -> Any:
+    """An Optuna storage for ``url`` with heartbeats every ``heartbeat_s`` seconds.
+
+    Parameters
+    ----------
+    url : str
+        A storage URL (module docstring).
+    heartbeat_s : int, optional
+        Heartbeat interval [s]; the grace period is three intervals. None: no
+        heartbeat (a planner that runs nothing itself).
+    must_exist : bool
+        Refuse a SQLite or journal file that does not exist yet instead of
+        creating it (a worker joins an existing plan).
+    """
+    url = normalise_storage_url(url)
+    if heartbeat_s is not None and (
+        isinstance(heartbeat_s, bool) or not isinstance(heartbeat_s, int) or heartbeat_s < 1
+    ):
+        raise InputDataError(
+            f"--heartbeat must be a whole number of seconds ≥ 1, got {heartbeat_s!r}"
+        )
+    grace = None if heartbeat_s is None else 3 * heartbeat_s
+    with _quiet_experimental():
+        retry = RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)
+    path = journal_path(url)
+    if must_exist:
+        local = missing_local_storage(url)
+        if local is not None:
+            raise InputDataError(
+                f"no storage at {local} yet; plan the study first "
+                "(surrogate run STUDY --storage URL --jobs 0)"
+            )
+    with storage_errors(url):
+        if path is not None:
+            return _HeartbeatJournalStorage(
+                JournalFileBackend(str(path)),
+                heartbeat_s=heartbeat_s,
+                grace_s=grace,
+                callback=retry,
+            )
+        with _quiet_experimental():
+            return RDBStorage(
+                url,
+                heartbeat_interval=heartbeat_s,
+                grace_period=grace,
+                heartbeat_stale_trial_callback=retry if heartbeat_s else None,
+                engine_kwargs=_engine_kwargs(url),
+            )
+
+
+def _engine_kwargs(url: str) -> dict[str, Any]:
+    if url.startswith("postgresql"):
+        return {"pool_pre_ping": True, "connect_args": {"connect_timeout": 10}}
+    return {}
+
+
+@contextlib.contextmanager
+def _quiet_experimental() -> Iterator[None]:
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        yield
+
+
+class _HeartbeatJournalStorage(JournalStorage, BaseHeartbeat):
+    """A journal storage with Optuna's heartbeat protocol.
+
+    The heartbeat is the system attribute ``surrogate:heartbeat`` (UNIX time);
+    a RUNNING trial is stale when both it and the trial's start are older than
+    the grace period, so :func:`optuna.storages.fail_stale_trials` works as on
+    an ``RDBStorage``.
+    """
+
+    def __init__(
+        self,
+        backend: JournalFileBackend,
+        *,
+        heartbeat_s: int | None,
+        grace_s: int | None,
+        callback: Callable[[optuna.Study, FrozenTrial], None] | None,
+    ) -> None:
+        super().__init__(backend)
+        self._heartbeat_s = heartbeat_s
+        self._grace_s = grace_s
+        self._callback = callback
+
+    def record_heartbeat(self, trial_id: int) -> None:
+        self.set_trial_system_attr(trial_id, HEARTBEAT_ATTR, time.time())
+
+    def _get_stale_trial_ids(self, study_id: int) -> list[int]:
+        if self._grace_s is None:
+            return []
+        now = time.time()
+        stale = []
+        for trial in self.get_all_trials(study_id, deepcopy=False, states=(TrialState.RUNNING,)):
+            start = trial.datetime_start.timestamp() if trial.datetime_start else 0.0
+            last = max(start, float(trial.system_attrs.get(HEARTBEAT_ATTR, 0.0)))
+            if now - last > self._grace_s:
+                stale.append(trial._trial_id)
+        return stale
+
+    def get_heartbeat_interval(self) -> int | None:
+        return self._heartbeat_s
+
+    def get_heartbeat_stale_trial_callback(
+        self,
+    ) -> Callable[[optuna.Study, FrozenTrial], None] | None:
+        return self._callback
+
+
+def storage_error_message(error: BaseException, url: str | None = None) -> str | None:
+    """One line for a storage failure (unreachable, read-only, full), else None."""
+    import sqlalchemy.exc
+
+    where = f" ({_redacted(url)})" if url else ""
+    if isinstance(error, optuna.exceptions.StorageInternalError) and error.__cause__:
+        error = error.__cause__  # Optuna wraps the database's own error
+    if isinstance(error, sqlalchemy.exc.SQLAlchemyError):
+        detail = str(getattr(error, "orig", None) or error).strip().splitlines()
+        text = detail[0] if detail else type(error).__name__
+        low = text.lower()
+        if "readonly" in low or "read-only" in low or "read only" in low:
+            return f"the storage{where} is read-only ({text}); use a writable storage"
+        if "full" in low or "no space" in low:
+            return f"the storage{where} is full ({text}); free space or use another storage"
+        return f"cannot use the storage{where}: {text}; check the URL and that the server runs"
+    if isinstance(error, OSError):
+        reason = error.strerror or str(error)
+        name = f": {error.filename}" if error.filename else ""
+        if error.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
+            return f"the storage{where} is full ({reason}); free space or use another storage"
+        return f"cannot write the storage{where}: {reason}{name}; check the path and permissions"
+    if isinstance(error, ImportError):
+        return f"the storage driver is missing ({error.name}); pip install 'psycopg[binary]'"
+    return None
+
+
+def _redacted(url: str) -> str:
+    """The URL without a password."""
+    head, sep, tail = url.partition("://")
+    if sep and "@" in tail:
+        credentials, _, host = tail.rpartition("@")
+        user = credentials.split(":", 1)[0]
+        return f"{head}://{user}@{host}"
+    return url
+
+
+@contextlib.contextmanager
+def storage_errors(url: str | None = None) -> Iterator[None]:
+    """Turn storage failures inside the block into :class:`StorageError`."""
+    try:
+        yield
+    except (InputDataError, optuna.exceptions.UpdateFinishedTrialError):
+        raise
+    except Exception as error:
+        message = storage_error_message(error, url)
+        if message is None:
+            raise
+        raise StorageError(message) from error
+
+
+def stale_trial_check(study: optuna.Study) -> None:
+    """Fail stale trials (their copies are queued again by the retry callback)."""
+    with _quiet_experimental():
+        optuna.storages.fail_stale_trials(study)

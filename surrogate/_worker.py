@@ -1,0 +1,527 @@
+"""``worker``: full-solver verification shared by many processes through a storage.
+
+The planner (``surrogate run``) queues each candidate point as a ``WAITING``
+trial of the study ``<name>/verify`` (``study.enqueue_trial`` with the hash of
+its solver inputs); workers on any machine claim a waiting trial (the storage
+moves it to ``RUNNING`` for exactly one of them), solve it through the result
+cache and finish it with the same record the in-process loop writes. A worker
+never creates a trial of its own.
+
+Faults: a worker keeps a heartbeat on its trial; a dead worker's trial goes
+stale, the next worker that looks fails it and
+``RetryHeartbeatStaleTrialCallback`` queues a copy, so the run is redone once
+(from the cache when the dead worker had finished solving). SIGTERM (or Ctrl-C)
+during a solve fails the trial, queues its copy and exits. A solver failure is a
+``FAIL`` trial with its ``reason``; the loop goes on.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import optuna
+from optuna.storages import RetryHeartbeatStaleTrialCallback
+from optuna.trial import FrozenTrial, TrialState
+
+from ._batch import solve_inputs, solver_inputs
+from ._cache import ResultCache, input_hash
+from ._errors import InputDataError
+from ._run import _open_study, _quiet_optuna, _record_of, tell_verification, verify_study_name
+from ._storage import (
+    MAX_RETRY,
+    check_workers,
+    open_storage,
+    stale_trial_check,
+    storage_errors,
+)
+from ._study import StudySpec, Targets, load_study
+
+__all__ = ["WorkerResult", "enqueue_points", "finished_records", "work"]
+
+Solve = Callable[[dict[str, Any]], dict[str, Any]]
+POLL_S = 0.5
+HEARTBEAT_S = 10
+
+
+@dataclass(frozen=True)
+class WorkerResult:
+    """Keys of ``surrogate worker --json``.
+
+    ``runs`` counts the trials this worker (all its processes) finished,
+    ``solved`` the solver runs among them (the rest came from the cache);
+    ``interrupted`` names the signal that stopped it, if any.
+    """
+
+    study: str
+    storage: str
+    jobs: int
+    runs: int
+    ok: int
+    failed: int
+    solved: int
+    interrupted: str | None
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+# -- planning --------------------------------------------------------------------------------
+def enqueue_points(
+    study: optuna.Study, spec: StudySpec, points: Iterable[Mapping[str, float]], *, phase: str
+) -> list[str]:
+    """Queue each point as a WAITING trial unless it is already queued, running or done.
+
+    Returns the input hashes of ``points`` in order (one per point).
+    """
+    known = {
+        t.user_attrs.get("input_hash")
+        for t in study.get_trials(deepcopy=False)
+        if t.state != TrialState.FAIL or "reason" in t.user_attrs or _retry_pending(t)
+    }
+    keys = []
+    for point in points:
+        params = {name: float(point[name]) for name in spec.space.names}
+        key = input_hash(solver_inputs(params, spec.rig, solver=spec.solver))
+        if key not in known:
+            study.enqueue_trial(params, user_attrs={"input_hash": key, "phase": phase})
+            known.add(key)
+        keys.append(key)
+    return keys
+
+
+def _retry_pending(trial: FrozenTrial) -> bool:
+    """An interrupted trial whose copy was queued again (see RetryHeartbeatStaleTrialCallback)."""
+    return len(trial.system_attrs.get("retry_history", [])) + 1 <= MAX_RETRY
+
+
+def finished_records(study: optuna.Study, keys: Iterable[str]) -> dict[str, dict[str, Any]]:
+    """The verifier's record of every key whose run is over (done, failed or abandoned)."""
+    wanted = set(keys)
+    by_key: dict[str, list[FrozenTrial]] = {}
+    for trial in study.get_trials(deepcopy=False):
+        key = trial.user_attrs.get("input_hash")
+        if key in wanted:
+            by_key.setdefault(key, []).append(trial)
+    records = {}
+    for key, trials in by_key.items():
+        done = [t for t in trials if t.state == TrialState.COMPLETE or "reason" in t.user_attrs]
+        if done:
+            records[key] = _record_of(done[-1])
+        elif all(t.state == TrialState.FAIL and not _retry_pending(t) for t in trials):
+            trial = trials[-1]
+            records[key] = {
+                "params": dict(trial.params),
+                "status": "failed",
+                "reason": f"its worker died {MAX_RETRY + 1} times",
+            }
+    return records
+
+
+class WorkerDispatcher:
+    """Verify a batch of points through the storage: queue, work or wait, collect.
+
+    ``jobs`` local worker processes run the batch (0: only wait for workers
+    started elsewhere with ``surrogate worker``; 1: this process works).
+    """
+
+    def __init__(
+        self,
+        spec: StudySpec,
+        storage: str,
+        *,
+        jobs: int,
+        heartbeat_s: int = HEARTBEAT_S,
+        solve: Solve = solve_inputs,
+        progress: bool = True,
+    ) -> None:
+        self.spec = spec
+        self.storage = storage
+        self.jobs = jobs
+        self.heartbeat_s = heartbeat_s
+        self.solve = solve
+        self.progress = progress
+
+    def __call__(
+        self, study: optuna.Study, points: list[dict[str, float]], phase: str
+    ) -> dict[str, dict[str, Any]]:
+        keys = enqueue_points(study, self.spec, points, phase=phase)
+        if self.jobs > 0:
+            todo = len(set(keys) - set(finished_records(study, keys)))
+            work(  # one point: this process, no start-up cost
+                self.spec,
+                storage=self.storage,
+                jobs=max(1, min(self.jobs, todo)),
+                heartbeat_s=self.heartbeat_s,
+                idle_timeout_s=0.0,
+                solve=self.solve,
+                progress=False,
+            )
+        elif self.progress:
+            print(
+                f"[{self.spec.name}] {phase}: {len(keys)} runs queued in {self.storage}; "
+                "waiting for `surrogate worker` processes",
+                file=sys.stderr,
+                flush=True,
+            )
+        while True:
+            records = finished_records(study, keys)
+            if len(records) == len(set(keys)):
+                return records
+            stale_trial_check(study)
+            time.sleep(POLL_S)
+
+
+# -- working ---------------------------------------------------------------------------------
+class _Interrupted(BaseException):
+    """Raised in the main thread by SIGTERM while a solve runs."""
+
+
+def work(
+    study: str | Path | StudySpec,
+    *,
+    storage: str,
+    jobs: int = 1,
+    heartbeat_s: int = HEARTBEAT_S,
+    idle_timeout_s: float = 60.0,
+    solve: Solve = solve_inputs,
+    progress: bool = True,
+) -> WorkerResult:
+    """Run queued verification trials of ``study`` until none is left.
+
+    Parameters
+    ----------
+    study : path or StudySpec
+        The study file the plan was made from (same rig, solver and space).
+    storage : str
+        Storage URL of the plan (``postgresql://…``, ``journal:///….log``;
+        ``sqlite:///…`` for one worker only).
+    jobs : int
+        Worker processes on this machine (1: this process).
+    heartbeat_s : int
+        Heartbeat interval [s]; a trial silent for three intervals is retried.
+    idle_timeout_s : float
+        Wait this long for new trials once the queue is empty and nothing runs.
+    solve : callable
+        The full solver on :func:`surrogate._batch.solver_inputs` (tests pass a
+        cheap stand-in here; a study file cannot).
+    progress : bool
+        One line per finished run on stderr.
+    """
+    spec = study if isinstance(study, StudySpec) else load_study(study)
+    check_workers(storage, jobs)
+    if jobs < 1:
+        raise InputDataError(f"--jobs must be ≥ 1 for a worker, got {jobs}")
+    if not isinstance(idle_timeout_s, int | float) or not idle_timeout_s >= 0:
+        raise InputDataError(f"--idle-timeout must be ≥ 0 s, got {idle_timeout_s!r}")
+    _quiet_optuna()
+    worker = _Worker(spec, storage, heartbeat_s=heartbeat_s, solve=solve, progress=progress)
+    if jobs == 1:
+        counts = worker.loop(idle_timeout_s)
+    else:
+        worker.close()
+        counts = _work_in_processes(
+            spec, storage, jobs, heartbeat_s, idle_timeout_s, solve, progress
+        )
+    return WorkerResult(verify_study_name(spec), storage, jobs, **counts)
+
+
+def _work_in_processes(
+    spec: StudySpec,
+    storage: str,
+    jobs: int,
+    heartbeat_s: int,
+    idle_timeout_s: float,
+    solve: Solve,
+    progress: bool,
+) -> dict[str, Any]:
+    """``jobs`` worker processes; SIGTERM to this one is passed on to them."""
+    # forkserver: a clean process (no inherited database connections) that has
+    # imported the package once; each worker forks from it in milliseconds
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(["surrogate._worker"])
+    results = context.SimpleQueue()
+    processes = [
+        context.Process(
+            target=_process_main,
+            args=(results, spec, storage, heartbeat_s, idle_timeout_s, solve, progress),
+        )
+        for _ in range(jobs)
+    ]
+    for process in processes:
+        process.start()
+
+    def forward(signum: int, frame: Any) -> None:
+        for process in processes:
+            if process.pid is not None and process.is_alive():
+                process.terminate()
+
+    previous = signal.signal(signal.SIGTERM, forward)
+    try:
+        for process in processes:
+            while process.is_alive():
+                process.join(timeout=0.5)
+    except KeyboardInterrupt:  # the children got SIGINT too and clean up
+        for process in processes:
+            process.join()
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    counts: dict[str, Any] = {"runs": 0, "ok": 0, "failed": 0, "solved": 0, "interrupted": None}
+    while not results.empty():
+        child = results.get()
+        for name in ("runs", "ok", "failed", "solved"):
+            counts[name] += child[name]
+        counts["interrupted"] = counts["interrupted"] or child["interrupted"]
+    if any(p.exitcode not in (0, None) for p in processes) and counts["interrupted"] is None:
+        counts["interrupted"] = "a worker process died"
+    return counts
+
+
+def _process_main(
+    results: Any,
+    spec: StudySpec,
+    storage: str,
+    heartbeat_s: int,
+    idle_timeout_s: float,
+    solve: Solve,
+    progress: bool,
+) -> None:
+    _quiet_optuna()
+    worker = _Worker(spec, storage, heartbeat_s=heartbeat_s, solve=solve, progress=progress)
+    results.put(worker.loop(idle_timeout_s))
+
+
+class _Worker:
+    """One worker process: claim, heartbeat, solve (through the cache), tell."""
+
+    def __init__(
+        self, spec: StudySpec, storage: str, *, heartbeat_s: int, solve: Solve, progress: bool
+    ) -> None:
+        self.url = storage
+        # get_storage: the study and this worker share one (cached) storage object
+        self.storage: Any = optuna.storages.get_storage(
+            open_storage(storage, heartbeat_s=heartbeat_s, must_exist=True)
+        )
+        with storage_errors(storage):
+            try:
+                self.study = optuna.load_study(
+                    study_name=verify_study_name(spec),
+                    storage=self.storage,
+                    sampler=optuna.samplers.RandomSampler(),
+                )
+            except KeyError:
+                raise InputDataError(
+                    f"no study {verify_study_name(spec)!r} in {storage}; plan it first: "
+                    f"surrogate run {spec.path} --storage {storage} --jobs 0"
+                ) from None
+        self.spec = _as_planned(spec, self.study.user_attrs)
+        self.study_id = self.storage.get_study_id_from_name(verify_study_name(spec))
+        self.heartbeat_s = heartbeat_s
+        self.solve = solve
+        self.progress = progress
+        self.cache = ResultCache(spec.directory / ".solver-cache")
+        self.counts: dict[str, Any] = {
+            "runs": 0,
+            "ok": 0,
+            "failed": 0,
+            "solved": 0,
+            "interrupted": None,
+        }
+        self._solving = False
+        self._stop: str | None = None
+
+    def close(self) -> None:
+        engine = getattr(getattr(self.storage, "_backend", self.storage), "engine", None)
+        if engine is not None:
+            engine.dispose()
+
+    def loop(self, idle_timeout_s: float) -> dict[str, Any]:
+        """Work until the queue is empty, nothing runs, and ``idle_timeout_s`` passed."""
+        main_thread = threading.current_thread() is threading.main_thread()
+        previous = {sig: signal.signal(sig, self._on_signal) for sig in _SIGNALS if main_thread}
+        try:
+            with storage_errors(self.url):
+                idle_since = time.monotonic()
+                while self._stop is None:
+                    stale_trial_check(self.study)
+                    trial_id = self._claim()
+                    if trial_id is not None:
+                        self._run(trial_id)
+                        idle_since = time.monotonic()
+                    elif self._running() or time.monotonic() - idle_since < idle_timeout_s:
+                        time.sleep(POLL_S)
+                    else:
+                        break
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+            self.close()
+        self.counts["interrupted"] = self._stop
+        return dict(self.counts)
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        self._stop = signal.Signals(signum).name
+        if self._solving:
+            raise _Interrupted(self._stop)
+
+    def _claim(self) -> int | None:
+        """Move one WAITING trial to RUNNING for this worker (the storage arbitrates)."""
+        for trial in self.storage.get_all_trials(
+            self.study_id, deepcopy=False, states=(TrialState.WAITING,)
+        ):
+            try:
+                if self.storage.set_trial_state_values(trial._trial_id, state=TrialState.RUNNING):
+                    self.storage.record_heartbeat(trial._trial_id)
+                    return trial._trial_id
+            except optuna.exceptions.UpdateFinishedTrialError:
+                continue
+        return None
+
+    def _running(self) -> bool:
+        return bool(
+            self.storage.get_all_trials(self.study_id, deepcopy=False, states=(TrialState.RUNNING,))
+        )
+
+    def _run(self, trial_id: int) -> None:
+        trial = optuna.Trial(self.study, trial_id)
+        beat = _HeartbeatThread(self.storage, trial_id, self.heartbeat_s)
+        beat.start()
+        try:
+            params = {
+                name: trial.suggest_float(name, d.low, d.high, log=d.log)
+                for name, d in _distributions(self.spec).items()
+            }
+            inputs = solver_inputs(params, self.spec.rig, solver=self.spec.solver)
+            key = input_hash(inputs)
+            result = self._result(key, inputs)
+        except _Interrupted:
+            beat.stop()
+            self._requeue(trial)
+            return
+        except BaseException:
+            beat.stop()
+            raise
+        beat.stop()
+        if trial.user_attrs.get("input_hash") not in (None, key):
+            result = {"status": "failed", "reason": "queued with other solver inputs (hash)"}
+        trial.set_user_attr("input_hash", key)
+        try:
+            record = tell_verification(self.study, trial, self.spec, params, result)
+        except optuna.exceptions.UpdateFinishedTrialError:
+            return  # judged stale meanwhile; its queued copy takes the cached result
+        self._count(trial.number, record)
+
+    def _result(self, key: str, inputs: dict[str, Any]) -> dict[str, Any]:
+        result = self.cache.get(key)
+        if result is not None:
+            return result
+        if self._stop is not None:
+            raise _Interrupted(self._stop)
+        self._solving = True
+        try:
+            result = self.solve(inputs)
+        except KeyboardInterrupt:
+            self._stop = "SIGINT"
+            raise _Interrupted(self._stop) from None
+        except Exception as error:  # a broken solver fails this run, not the worker
+            result = {"status": "failed", "reason": f"{type(error).__name__}: {error}"}
+        finally:
+            self._solving = False
+        self.counts["solved"] += 1
+        self.cache.put(key, inputs, result)
+        return result
+
+    def _requeue(self, trial: optuna.Trial) -> None:
+        """FAIL the interrupted trial after queueing its copy (as a stale trial's)."""
+        frozen = self.storage.get_trial(trial._trial_id)
+        RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)(self.study, frozen)
+        try:
+            self.storage.set_trial_system_attr(trial._trial_id, "interrupted", self._stop)
+            self.study.tell(trial, state=TrialState.FAIL)
+        except optuna.exceptions.UpdateFinishedTrialError:
+            pass  # judged stale meanwhile: failed and queued again already
+        if self.progress:
+            print(
+                f"[{self.spec.name}] trial {trial.number}: stopped by {self._stop}; "
+                "queued again for another worker",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    def _count(self, number: int, record: dict[str, Any]) -> None:
+        self.counts["runs"] += 1
+        self.counts["ok" if record["status"] == "ok" else "failed"] += 1
+        if self.progress:
+            text = (
+                f"F60 {record['f60_n']:.4g} N, misfit {100 * record['misfit']:.2f} %"
+                if record["status"] == "ok"
+                else f"failed: {record['reason']}"
+            )
+            print(f"[{self.spec.name}] trial {number}: {text}", file=sys.stderr, flush=True)
+
+
+_SIGNALS = (signal.SIGTERM, signal.SIGINT)
+
+
+class _HeartbeatThread:
+    """Records the trial's heartbeat every ``interval_s`` until stopped."""
+
+    def __init__(self, storage: Any, trial_id: int, interval_s: int) -> None:
+        self._storage = storage
+        self._trial_id = trial_id
+        self._interval_s = interval_s
+        self._stopped = threading.Event()
+        self._thread = threading.Thread(target=self._beat, daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stopped.set()
+        self._thread.join()
+
+    def _beat(self) -> None:
+        while not self._stopped.wait(self._interval_s):
+            try:
+                self._storage.record_heartbeat(self._trial_id)
+            except optuna.exceptions.UpdateFinishedTrialError:
+                return  # failed as stale by another worker: nothing to keep alive
+            except Exception:  # a storage hiccup: the next beat retries
+                continue
+
+
+def _distributions(spec: StudySpec) -> dict[str, optuna.distributions.FloatDistribution]:
+    return {
+        p.name: optuna.distributions.FloatDistribution(p.low, p.high, log=p.log) for p in spec.space
+    }
+
+
+def _as_planned(spec: StudySpec, attrs: Mapping[str, Any]) -> StudySpec:
+    """The study file with the plan's target; refuse a file that differs from the plan."""
+    for key, mine in (
+        ("solver", spec.solver),
+        ("rig", spec.rig.to_dict()),
+        ("parameters", spec.space.to_dict()),
+    ):
+        if key in attrs and attrs[key] != mine:
+            raise InputDataError(
+                f"{spec.path}: its [{'parameters' if key == 'parameters' else key}] differs from "
+                f"the plan in the storage; start the worker with the planner's study file"
+            )
+    target = attrs.get("target_f60_n", spec.targets.f60_n)
+    tolerance = attrs.get("tolerance", spec.targets.tolerance)
+    return replace(spec, targets=Targets(target, tolerance))
+
+
+def open_planner_study(spec: StudySpec, storage: str, *, heartbeat_s: int | None) -> optuna.Study:
+    """The verify study for a planner (created if new), on a heartbeat-aware storage."""
+    _quiet_optuna()
+    with storage_errors(storage):
+        return _open_study(spec, open_storage(storage, heartbeat_s=heartbeat_s))

@@ -1,0 +1,125 @@
+"""Real components the system tests need (PostgreSQL, Chromium): find or give up.
+
+In CI (``CI=true``) a missing component fails the test; elsewhere it skips with
+the reason. ``scripts/system-packages.sh`` installs both when run as root.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import os
+import pwd
+import shutil
+import socket
+import subprocess
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+INSTALL = "run scripts/system-packages.sh as root (Debian: apt-get install postgresql chromium)"
+
+
+def missing(reason: str) -> None:
+    """Fail in CI, skip elsewhere."""
+    if os.environ.get("CI", "").lower() == "true":
+        pytest.fail(f"{reason} (CI=true: a missing component is a failure)", pytrace=False)
+    pytest.skip(reason)
+
+
+def postgres_bin_dir() -> Path | None:
+    """A folder with initdb, pg_ctl and postgres (PATH first, then Debian's layout)."""
+    candidates = []
+    if shutil.which("initdb"):
+        candidates.append(Path(shutil.which("initdb")).resolve().parent)
+    candidates += [
+        Path(d)
+        for d in sorted(
+            glob.glob("/usr/lib/postgresql/*/bin"),
+            key=lambda d: int(Path(d).parent.name) if Path(d).parent.name.isdigit() else 0,
+            reverse=True,
+        )
+    ]
+    for folder in candidates:
+        if all(os.access(folder / name, os.X_OK) for name in ("initdb", "pg_ctl", "postgres")):
+            return folder
+    return None
+
+
+def chromium_binary() -> str | None:
+    for name in ("chromium", "chromium-browser"):
+        found = shutil.which(name)
+        if found:
+            return found
+    return "/usr/bin/chromium" if os.access("/usr/bin/chromium", os.X_OK) else None
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+class ComponentMissing(RuntimeError):
+    """A real component a test or benchmark needs is not installed."""
+
+
+def _as_server_user(command: list[str]) -> list[str]:
+    """postgres refuses to run as root: run it as the ``postgres`` user then."""
+    return ["runuser", "-u", "postgres", "--", *command] if os.geteuid() == 0 else command
+
+
+@contextlib.contextmanager
+def throwaway_postgres() -> Iterator[str]:
+    """Start a PostgreSQL server in a temporary folder; yield its URL (no database).
+
+    It listens on 127.0.0.1 only, on a free port, with trust authentication for
+    the user ``surrogate``; it is stopped and its folder deleted afterwards.
+    """
+    bindir = postgres_bin_dir()
+    if bindir is None:
+        raise ComponentMissing(f"PostgreSQL (initdb, pg_ctl, postgres) not found; {INSTALL}")
+    folder = Path(tempfile.mkdtemp(prefix="surrogate-pg-"))
+    if os.geteuid() == 0:
+        if shutil.which("runuser") is None:
+            raise ComponentMissing("running as root and runuser is missing")
+        try:
+            user = pwd.getpwnam("postgres")
+        except KeyError:
+            raise ComponentMissing("running as root and there is no 'postgres' user") from None
+        os.chown(folder, user.pw_uid, user.pw_gid)
+    data, port = folder / "data", free_port()
+
+    def run(*args: str) -> None:
+        command = _as_server_user([str(bindir / args[0]), *args[1:]])
+        subprocess.run(command, check=True, capture_output=True, text=True, timeout=120, cwd=folder)
+
+    try:
+        run("initdb", "-D", str(data), "-U", "surrogate", "-A", "trust", "-E", "UTF8", "--no-sync")
+        options = (
+            f"-c listen_addresses=127.0.0.1 -p {port} -k {folder} "
+            "-c fsync=off -c synchronous_commit=off -c full_page_writes=off"
+        )
+        run("pg_ctl", "-D", str(data), "-o", options, "-l", str(folder / "log"), "-w", "start")
+        yield f"postgresql://surrogate@127.0.0.1:{port}"
+    finally:
+        if (data / "postmaster.pid").exists():
+            subprocess.run(
+                _as_server_user(
+                    [str(bindir / "pg_ctl"), "-D", str(data), "-m", "immediate", "stop"]
+                ),
+                capture_output=True,
+                timeout=60,
+            )
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def create_database(server_url: str, name: str) -> str:
+    """A new empty database on ``server_url``; returns its URL."""
+    import psycopg
+
+    with psycopg.connect(f"{server_url}/postgres", autocommit=True) as connection:
+        connection.execute(f'CREATE DATABASE "{name}"')
+    return f"{server_url}/{name}"

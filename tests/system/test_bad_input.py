@@ -1,0 +1,211 @@
+"""Bad input everywhere: one line on stderr, exit code 2, every file byte-identical.
+
+Each case runs the CLI's ``main`` in a copy of one project folder (a study, a
+sample set, an SQLite storage with finished verify trials, a journal with a
+queued plan, a result cache), after writing the malformed file it needs; the
+SHA-256 of every file in the folder, the storages included, is compared before
+and after.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import shutil
+from pathlib import Path
+
+import pytest
+
+from surrogate._cli import main
+from surrogate._doe import make_design
+from surrogate._study import load_study
+from surrogate._worker import enqueue_points, open_planner_study, work
+from tests.workers.fixed_cost import FixedCostSolve
+
+REPO = Path(__file__).resolve().parents[2]
+STUDY = (REPO / "studies" / "paper_coating.toml").read_text()
+SIM = ["simulate", "--ecoat", "1", "--scoat", "0.2", "--tcoat", "0.012"]
+
+
+def _study(old: str, new: str) -> str:
+    assert old in STUDY, old
+    return STUDY.replace(old, new, 1)
+
+
+# (id, {file: text}, argv); "{d}" in argv is the case's folder
+CASES = [
+    ("study-not-toml", {"bad.toml": "[study\nname = 1"}, ["run", "bad.toml"]),
+    ("study-unknown-section", {"bad.toml": STUDY + "\n[solvers]\nx = 1\n"}, ["run", "bad.toml"]),
+    (
+        "study-bad-name",
+        {"bad.toml": _study('name = "paper-coating"', 'name = "bad name!"')},
+        ["run", "bad.toml"],
+    ),
+    ("study-negative-seed", {"bad.toml": _study("seed = 0", "seed = -1")}, ["run", "bad.toml"]),
+    (
+        "study-low-above-high",
+        {"bad.toml": _study("low = 0.5,  high = 4.0", "low = 5.0,  high = 4.0")},
+        ["run", "bad.toml"],
+    ),
+    (
+        "study-missing-parameter",
+        {"bad.toml": _study("tcoat_mm  = { low = 0.01, high = 0.1, log = true }", "")},
+        ["run", "bad.toml"],
+    ),
+    (
+        "study-wrong-unit",
+        {"bad.toml": _study("low = 0.5,  high = 4.0,", 'low = 0.5,  high = 4.0, unit = "MPa",')},
+        ["run", "bad.toml"],
+    ),
+    (
+        "study-budget-below-design",
+        {"bad.toml": _study("max_solver_calls = 30", "max_solver_calls = 2")},
+        ["run", "bad.toml"],
+    ),
+    (
+        "study-unknown-solver",
+        {"bad.toml": _study('kind = "builtin"', 'kind = "abaqus-not-here"')},
+        ["run", "bad.toml"],
+    ),
+    (
+        "study-tolerance-not-relative",
+        {"bad.toml": _study("tolerance = 0.01", "tolerance = 2.0")},
+        ["run", "bad.toml"],
+    ),
+    ("study-target-nan", {"bad.toml": _study("f60_n = 9.958", "f60_n = nan")}, ["run", "bad.toml"]),
+    (
+        "study-theta-above-range",
+        {"bad.toml": _study("theta_sat_deg_min = 80.0", "theta_sat_deg_min = 95.0")},
+        ["run", "bad.toml"],
+    ),
+    ("study-missing-file", {}, ["run", "no-such-study.toml"]),
+    ("study-not-utf8", {"bad.toml": b"\xff\xfe[study]\n"}, ["run", "bad.toml"]),
+    (
+        "measurements-escape-project",
+        {"bad.toml": STUDY + '\n[measurements]\nfile = "../../../etc/passwd"\n'},
+        ["run", "bad.toml"],
+    ),
+    (
+        "measurements-file-not-a-path",
+        {"bad.toml": STUDY + "\n[measurements]\nfile = 3\n"},
+        ["run", "bad.toml"],
+    ),
+    ("samples-missing-file", {}, ["fit", "nothing.csv"]),
+    (
+        "samples-nan",
+        {
+            "bad.csv": "run_id,ecoat_gpa,scoat_gpa,tcoat_mm,f60_n,theta_sat_deg,status\n"
+            + "".join(f"{i},1,0.2,{'nan' if i == 2 else 0.01},9,80,ok\n" for i in range(1, 6))
+        },
+        ["fit", "bad.csv"],
+    ),
+    ("samples-no-columns", {"bad.csv": "a,b\n1,2\n"}, ["fit", "bad.csv"]),
+    ("samples-binary", {"bad.csv": b"\x00\x01\x02\xff" * 64}, ["fit", "bad.csv"]),
+    ("model-not-json", {"model.json": "{not json"}, ["predict", "model.json", "samples.csv"]),
+    ("cli-negative-ecoat", {}, ["simulate", "--ecoat", "-1", "--scoat", "0.2", "--tcoat", "0.01"]),
+    ("cli-nan-tcoat", {}, ["simulate", "--ecoat", "1", "--scoat", "0.2", "--tcoat", "nan"]),
+    ("cli-unknown-option", {}, [*SIM, "--colour", "red"]),
+    ("cli-budget-below-design", {}, ["run", "paper_coating.toml", "--budget", "2"]),
+    ("cli-target-not-number", {}, ["run", "paper_coating.toml", "--target", "f60_n=abc"]),
+    ("cli-negative-seed", {}, ["run", "paper_coating.toml", "--seed", "-3"]),
+    ("cli-doe-zero-points", {}, ["doe", "--design", "lhs", "--n", "0", "--out", "x.csv"]),
+    ("cli-privileged-port", {}, ["dashboard", "paper_coating.toml", "--port", "80"]),
+    ("plugin-missing", {}, [*SIM, "--plugin", "no_such_plugin_module_xyz"]),
+    ("plugin-not-a-module-name", {}, [*SIM, "--plugin", "../evil.py"]),
+    ("effect-unknown", {}, [*SIM, "--effect", "no_such_effect"]),
+    ("effect-value-not-number", {}, [*SIM, "--effect", "hardening:ratio=abc"]),
+    (
+        "storage-sqlite-many-workers",
+        {},
+        [
+            "worker",
+            "paper_coating.toml",
+            "--storage",
+            "sqlite:///{d}/paper-coating.db",
+            "--jobs",
+            "2",
+        ],
+    ),
+    (
+        "storage-sqlite-run-jobs",
+        {},
+        ["run", "paper_coating.toml", "--storage", "sqlite:///{d}/paper-coating.db", "--jobs", "3"],
+    ),
+    ("storage-unknown-scheme", {}, ["worker", "paper_coating.toml", "--storage", "bogus://x"]),
+    ("storage-not-a-url", {}, ["worker", "paper_coating.toml", "--storage", "study.db"]),
+    (
+        "storage-journal-missing",
+        {},
+        ["worker", "paper_coating.toml", "--storage", "journal:///{d}/missing.log"],
+    ),
+    (
+        "storage-postgres-unreachable",
+        {},
+        ["worker", "paper_coating.toml", "--storage", "postgresql://nobody@127.0.0.1:1/none"],
+    ),
+    (
+        "storage-heartbeat-zero",
+        {},
+        ["worker", "paper_coating.toml", "--storage", "{d}/study.log", "--heartbeat", "0"],
+    ),
+    (
+        "storage-study-not-planned",
+        {"other.toml": _study('name = "paper-coating"', 'name = "other"')},
+        ["worker", "other.toml", "--storage", "{d}/study.log"],
+    ),
+    (
+        "storage-study-file-differs-from-plan",
+        {"changed.toml": _study("friction = 0.1", "friction = 0.3")},
+        ["worker", "changed.toml", "--storage", "sqlite:///{d}/paper-coating.db"],
+    ),
+]
+
+
+@pytest.fixture(scope="module")
+def project(tmp_path_factory):
+    """A project folder with data, two storages and a result cache."""
+    folder = tmp_path_factory.mktemp("project")
+    (folder / "paper_coating.toml").write_text(STUDY)
+    for name in ("paper_stage1_samples.csv", "paper_stage1_samples_curves.csv"):
+        shutil.copy(REPO / "data" / name, folder / name.replace("paper_stage1_", ""))
+    spec = load_study(folder / "paper_coating.toml")
+    points = make_design("lhs", spec.space, n=4, seed=0).to_dict("records")
+    for storage, finished in ((spec.default_storage(), True), (f"{folder}/study.log", False)):
+        enqueue_points(open_planner_study(spec, storage, heartbeat_s=None), spec, points, phase="p")
+        if finished:
+            solve = FixedCostSolve(folder / "solver.log", 0.0)
+            work(spec, storage=storage, idle_timeout_s=0.0, solve=solve, progress=False)
+    return folder
+
+
+def _hashes(folder: Path) -> dict[str, str]:
+    return {
+        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.mark.parametrize(("files", "argv"), [c[1:] for c in CASES], ids=[c[0] for c in CASES])
+def test_bad_input_is_one_line_exit_2_and_nothing_changes(
+    files, argv, project, tmp_path, monkeypatch, capsys
+):
+    folder = tmp_path / "project"
+    shutil.copytree(project, folder)
+    for name, text in files.items():
+        path = folder / name
+        path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    monkeypatch.chdir(folder)
+    before = _hashes(folder)
+    assert (folder / "paper-coating.db").exists() and (folder / ".solver-cache").is_dir()
+    with pytest.raises(SystemExit) as stop:
+        main([arg.replace("{d}", str(folder)) for arg in argv])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2, err
+    assert len(err.strip().splitlines()) == 1, err
+    assert err.startswith("surrogate: error:") or err.startswith("surrogate "), err
+    assert _hashes(folder) == before
+
+
+def test_there_are_at_least_25_cases():
+    assert len(CASES) >= 25
+    assert len({c[0] for c in CASES}) == len(CASES)
