@@ -41,12 +41,15 @@ TESTS = [
 TEMPERATURE_C = [21.5, 23.0, 22.1, 24.8, 21.0, 23.6, 22.4, 25.1, 21.8, 24.0]
 
 
-def main() -> None:
+def main(root: Path = ROOT) -> None:
+    """Write the data set and its truth under ``root`` (the repository by default)."""
     tests = [{**t, "temperature_c": c} for t, c in zip(TESTS, TEMPERATURE_C, strict=True)]
     table = synthetic_measurements(
         tests, coating=COATING, effects=HIDDEN, noise_n=NOISE_N, seed=SEED
     )
-    out = ROOT / "data" / "measurements" / "webbing_tests.csv"
+    out = root / "data" / "measurements" / "webbing_tests.csv"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    (root / "tests" / "data").mkdir(parents=True, exist_ok=True)
     atomic_write_text(out, table.to_csv(index=False, float_format="%.6g"))
     truth = {
         "note": "truth of data/measurements/webbing_tests.csv; for tests only",
@@ -57,9 +60,9 @@ def main() -> None:
         "decoy_covariates": ["temperature_c", "direction", "rate_deg_s"],
     }
     atomic_write_text(
-        ROOT / "tests" / "data" / "webbing_tests_truth.json", json.dumps(truth, indent=2) + "\n"
+        root / "tests" / "data" / "webbing_tests_truth.json", json.dumps(truth, indent=2) + "\n"
     )
-    print(f"wrote {out.relative_to(ROOT)}: {table.test_id.nunique()} tests, {len(table)} rows")
+    print(f"wrote {out}: {table.test_id.nunique()} tests, {len(table)} rows")
 
 
 if __name__ == "__main__":

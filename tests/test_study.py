@@ -84,6 +84,19 @@ BAD = {
         GOOD + '\n[measurements]\nfile = "../../../../etc/passwd"\n',
         "leaves the project folder",
     ),
+    "effects-not-a-list": (GOOD + '\n[model]\neffects = "tension"\n', "[model] effects must"),
+    "effects-twice": (
+        GOOD + '\n[model]\neffects = ["tension", "tension"]\n',
+        "names an effect twice",
+    ),
+    "calibration-budget": (
+        GOOD.replace("[budget]", "[budget]\ncalibration_solver_calls = 2"),
+        "budget.calibration_solver_calls",
+    ),
+    "noise-negative": (
+        GOOD + '\n[measurements]\nfile = "m.csv"\nnoise_n = -1\n',
+        "measurements.noise_n",
+    ),
 }
 
 
