@@ -300,35 +300,18 @@ class _Problem:
             residual[:N] += self.tension * h * e[:, 1]
         if self.line_load:
             residual[:N] += self.line_load * h * self.carried * e[:, 0]
-        if not self.has_probe or not self.active:
-            if self.has_probe:
-                contact = _find_contact(h, e, n, _nodes(h, e), self.centre, preferred)
-                residual[N] = lam
-                return _Evaluation(
-                    psi,
-                    lam,
-                    residual,
-                    state,
-                    moment,
-                    stiff,
-                    kappa,
-                    e,
-                    contact,
-                    0.0,
-                    False,
-                    np.zeros(2),
-                    active=False,
-                    gap=contact.distance - self.rho,
-                )
-            residual[N] = lam
-            return _Evaluation(
-                psi, lam, residual, state, moment, stiff, kappa, e, None, 0.0, False, np.zeros(2)
-            )
-        contact = _find_contact(h, e, n, _nodes(h, e), self.centre, preferred)
-        residual[:N] += lam * (contact.normal @ contact.jac)
-        residual[N] = contact.distance - self.rho
+        contact = (
+            _find_contact(h, e, n, _nodes(h, e), self.centre, preferred) if self.has_probe else None
+        )
+        active = contact is not None and self.active
         friction, sticking, slip_vec = 0.0, False, np.zeros(2)
-        if self.mu:
+        if contact is None or not active:
+            residual[N] = lam  # no probe, or the strip is off it: no contact force
+        else:
+            residual[:N] += lam * (contact.normal @ contact.jac)
+            residual[N] = contact.distance - self.rho
+        if active and self.mu:
+            assert contact is not None
             if contact.on_vertex:
                 before = previous.nodes[contact.upstream]
             else:
@@ -355,6 +338,8 @@ class _Problem:
             friction,
             sticking,
             slip_vec,
+            active=active,
+            gap=0.0 if contact is None else contact.distance - self.rho,
         )
 
     def jacobian(self, ev: _Evaluation, stiff: np.ndarray | None = None) -> np.ndarray:
