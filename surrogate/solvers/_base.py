@@ -47,11 +47,13 @@ __all__ = [
 class Solver:
     """Base class of full solvers.
 
-    Subclasses set :attr:`name` and :attr:`settings_keys` (the keys allowed in
-    ``inputs["solver_settings"]``) and implement :meth:`solve`.
+    Subclasses set :attr:`name`, :attr:`version` (bump it when results change:
+    it keys the result cache) and :attr:`settings_keys` (the keys allowed in
+    ``inputs["solver_settings"]``), and implement :meth:`solve`.
     """
 
     name: ClassVar[str] = ""
+    version: ClassVar[str] = ""
     settings_keys: ClassVar[tuple[str, ...]] = ()
 
     def solve(self, inputs: Mapping[str, Any]) -> dict[str, Any]:  # pragma: no cover
@@ -156,9 +158,7 @@ def curve_result(
 
 
 @contextmanager
-def work_directory(
-    settings: Mapping[str, Any], *, prefix: str
-) -> Iterator[Path]:
+def work_directory(settings: Mapping[str, Any], *, prefix: str) -> Iterator[Path]:
     """A fresh working directory under ``settings["workdir_root"]`` (or the system
     temp dir), removed afterwards unless ``settings["keep_workdir"]`` is true."""
     root = settings.get("workdir_root")

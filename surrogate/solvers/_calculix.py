@@ -49,9 +49,17 @@ from ._base import (
     work_directory,
 )
 
-__all__ = ["CALCULIX_MESHES", "CalculixMesh", "CalculixSolver", "calculix_deck", "parse_calculix_dat"]
+__all__ = [
+    "CALCULIX_MESHES",
+    "CalculixMesh",
+    "CalculixSolver",
+    "calculix_deck",
+    "parse_calculix_dat",
+]
 
 SLICE_WIDTH_MM = 0.2
+DECK_VERSION = "ccx-deck-1"
+"""Bump whenever a change to the deck changes results (it keys the cache)."""
 JOB = "bending"
 
 
@@ -85,11 +93,13 @@ CALCULIX_MESHES = {
 
 
 # -- the deck ---------------------------------------------------------------------------------
-def _strip_stations(rig_l_mm: float, free_mm: float, mesh: CalculixMesh) -> tuple[np.ndarray, float]:
+def _strip_stations(
+    rig_l_mm: float, free_mm: float, mesh: CalculixMesh
+) -> tuple[np.ndarray, float]:
     """Corner x-stations of the strip and the end of the fine zone [mm]."""
     fine_end = min(1.3 * rig_l_mm + 1.0, free_mm)
     end = min(free_mm, fine_end + 0.5 * rig_l_mm + 5.0)
-    n_fine = max(int(math.ceil(fine_end / mesh.element_mm)), 4)
+    n_fine = max(math.ceil(fine_end / mesh.element_mm), 4)
     stations = list(np.linspace(0.0, fine_end, n_fine + 1))
     size = fine_end / n_fine
     while stations[-1] < end - 1e-9:
@@ -167,9 +177,15 @@ class _Deck:
         elements = [
             (
                 base + s,
-                nid(s, 0, 0), nid(s + 1, 0, 0), nid(s + 1, 1, 0), nid(s, 1, 0),
-                nid(s, 0, 1), nid(s + 1, 0, 1), nid(s + 1, 1, 1), nid(s, 1, 1),
-            )  # fmt: skip
+                nid(s, 0, 0),
+                nid(s + 1, 0, 0),
+                nid(s + 1, 1, 0),
+                nid(s, 1, 0),
+                nid(s, 0, 1),
+                nid(s + 1, 0, 1),
+                nid(s + 1, 1, 1),
+                nid(s, 1, 1),
+            )
             for s in range(m)
         ]
         return nodes, elements
@@ -200,9 +216,7 @@ class _Deck:
         lines += self._step(rot)
         return "\n".join(lines) + "\n"
 
-    def _sets(
-        self, top: list[tuple[int, ...]], probe_elements: list[tuple[int, ...]]
-    ) -> list[str]:
+    def _sets(self, top: list[tuple[int, ...]], probe_elements: list[tuple[int, ...]]) -> list[str]:
         clamp = [self.node_id(0, j, k) for j in range(3) for k in range(7) if j % 2 + k % 2 <= 1]
         face = [
             self.node_id(i, 0, k)
@@ -211,11 +225,9 @@ class _Deck:
             if i % 2 + k % 2 <= 1
         ]
         low, high = 0.75 * self.rig.bending_length_mm, self.fine_end
-        slave = [
-            e[0] for a, e in enumerate(top) if self.x[a + 1] > low and self.x[a] < high
-        ]
-        lines = ["*NSET, NSET=CLAMP"] + _chunks(clamp)
-        lines += ["*NSET, NSET=YFACE"] + _chunks(face)
+        slave = [e[0] for a, e in enumerate(top) if self.x[a + 1] > low and self.x[a] < high]
+        lines = ["*NSET, NSET=CLAMP", *_chunks(clamp)]
+        lines += ["*NSET, NSET=YFACE", *_chunks(face)]
         lines += ["*SURFACE, NAME=STRIPTOP, TYPE=ELEMENT"] + [f"{e}, S2" for e in slave]
         lines += ["*SURFACE, NAME=PROBESURF, TYPE=ELEMENT"]
         lines += [f"{e[0]}, S5" for e in probe_elements]
@@ -351,8 +363,11 @@ def calculix_deck(state: ModelState, *, mesh: str | CalculixMesh = "coarse") -> 
 
 
 # -- the output -------------------------------------------------------------------------------
-_HEADER = re.compile(r"^\s*(total force \(fx,fy,fz\)|displacements \(vx,vy,vz\)) for set (\S+)"
-                     r" and time\s+(\S+)", re.IGNORECASE)
+_HEADER = re.compile(
+    r"^\s*(total force \(fx,fy,fz\)|displacements \(vx,vy,vz\)) for set (\S+)"
+    r" and time\s+(\S+)",
+    re.IGNORECASE,
+)
 
 
 @dataclass(frozen=True)
@@ -427,6 +442,7 @@ class CalculixSolver(Solver):
     """
 
     name: ClassVar[str] = "calculix"
+    version: ClassVar[str] = DECK_VERSION
     settings_keys: ClassVar[tuple[str, ...]] = (
         "mesh",
         "command",
