@@ -334,7 +334,7 @@ class LsDynaSolver(Solver):
             )
             rcforc = _read(workdir / "rcforc")
             nodout = _read(workdir / "nodout") if "rotation_node" in settings else ""
-            messages = _read(workdir / "d3hsp") + done.stdout
+            messages = "\n".join((_read(workdir / "d3hsp"), done.stdout, done.stderr))
         if done.returncode != 0 or "E r r o r   t e r m i n a t i o n" in messages:
             return failed_result(f"LS-DYNA failed (exit {done.returncode}): {_reason(messages)}")
         return self._curve(state, settings, deck, rcforc, nodout)
