@@ -44,8 +44,8 @@ class Case:
 CASES = (
     # elastic: a yield stress far above any skin stress reached (yield strain 100)
     Case("elastic", 1.0, 100.0, 0.012, 0.0, 0.05),
-    # yielding: the coat yields near 15-35° (built-in θsat = 35°), then a plateau
-    Case("yielding", 1.0, 0.1, 0.05, 0.0, 0.05),
+    # yielding: the coat yields at ~43° (built-in), a plastic hinge at the clamp, then a plateau
+    Case("yielding", 1.0, 0.12, 0.02, 0.0, 0.05),
     # frictional: the elastic coat with μ = 0.3 at the probe
     Case("frictional", 1.0, 100.0, 0.012, 0.3, None),
 )

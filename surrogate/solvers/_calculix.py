@@ -58,7 +58,7 @@ __all__ = [
 ]
 
 SLICE_WIDTH_MM = 0.2
-DECK_VERSION = "ccx-deck-2"
+DECK_VERSION = "ccx-deck-3"
 """Bump whenever a change to the deck changes results (it keys the cache)."""
 JOB = "bending"
 
@@ -70,7 +70,12 @@ class CalculixMesh:
     Attributes
     ----------
     element_mm : float
-        Element length along the strip from the clamp through the contact zone.
+        Element length along the strip through the contact zone.
+    clamp_element_mm, clamp_zone_mm : float
+        Element length over the first ``clamp_zone_mm`` from the clamp. An
+        ideal-plastic hinge localises into the first row of elements at the
+        clamp; elements much shorter than the skin thickness there reach skin
+        strains of several 100 % and ccx stops (0.1 mm did, at 40°).
     tail_element_mm : float
         Largest element length in the unloaded tail.
     probe_segments : int
@@ -80,6 +85,8 @@ class CalculixMesh:
     """
 
     element_mm: float
+    clamp_element_mm: float
+    clamp_zone_mm: float
     tail_element_mm: float
     probe_segments: int
     max_increment_deg: float
@@ -87,8 +94,8 @@ class CalculixMesh:
 
 
 CALCULIX_MESHES = {
-    "fine": CalculixMesh(0.1, 1.0, 96, 1.0, 0.5),
-    "coarse": CalculixMesh(0.4, 2.0, 48, 2.0, 1.0),
+    "fine": CalculixMesh(0.1, 0.4, 2.0, 1.0, 96, 1.0, 0.5),
+    "coarse": CalculixMesh(0.4, 0.4, 0.0, 2.0, 48, 2.0, 1.0),
 }
 
 
@@ -99,9 +106,15 @@ def _strip_stations(
     """Corner x-stations of the strip and the end of the fine zone [mm]."""
     fine_end = min(1.3 * rig_l_mm + 1.0, free_mm)
     end = min(free_mm, fine_end + 0.5 * rig_l_mm + 5.0)
-    n_fine = max(math.ceil(fine_end / mesh.element_mm), 4)
-    stations = list(np.linspace(0.0, fine_end, n_fine + 1))
-    size = fine_end / n_fine
+    clamp_end = min(mesh.clamp_zone_mm, 0.5 * fine_end)
+    stations = list(np.linspace(0.0, clamp_end, math.ceil(clamp_end / mesh.clamp_element_mm) + 1))
+    if mesh.clamp_element_mm > 2.0 * mesh.element_mm and clamp_end > 0.0:  # a transition
+        middle = 0.5 * (mesh.clamp_element_mm + mesh.element_mm)
+        stations += [clamp_end + middle, clamp_end + 2.0 * middle]
+    start = stations[-1]
+    n_fine = max(math.ceil((fine_end - start) / mesh.element_mm), 4)
+    stations += list(np.linspace(start, fine_end, n_fine + 1)[1:])
+    size = (fine_end - start) / n_fine
     while stations[-1] < end - 1e-9:
         size = min(1.5 * size, mesh.tail_element_mm)
         stations.append(min(stations[-1] + size, end))
