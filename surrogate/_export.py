@@ -162,12 +162,19 @@ def _lsdyna_text(
         "*KEYWORD",
     ]
     block = fill_parameters("\n".join(header), values).splitlines()
-    columns = ("P1DOFF", "FORM", "ECOAT", "TCOAT", "SCOAT")
+    from .solvers._lsdyna import format_real
+
     snippet = [
         "$",
-        "$ *MAT_SEATBELT_2D, card 3: the coating fields (keep P1DOFF and FORM of your deck;",
-        "$ TCOAT comes before SCOAT here, unlike *MAT_FABRIC). Paste without the '$ ':",
-        "$" + "".join(c.rjust(FIELD) for c in columns)[1:],
+        "$ *MAT_SEATBELT_2D, card 3: the coating fields. Refer to the parameters above or",
+        "$ use the values; to use a line, replace its '$' in column 1 by a blank and keep",
+        "$ your deck's P1DOFF and FORM (fields 1-2). TCOAT comes before SCOAT on this card",
+        "$ (unlike *MAT_FABRIC).",
+        "$#  p1doff      form     ecoat     tcoat     scoat",
         "$" + "".join(v.rjust(FIELD) for v in ("", "", "&ECOAT", "&TCOAT", "&SCOAT"))[1:],
+        "$"
+        + "".join(
+            [" " * 2 * FIELD] + [format_real(values[name]) for name in ("ECOAT", "TCOAT", "SCOAT")]
+        )[1:],
     ]
     return "\n".join([line for line in block if line != "*KEYWORD"] + snippet) + "\n"

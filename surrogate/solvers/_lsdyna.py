@@ -83,9 +83,10 @@ def coating_parameters(state: ModelState, *, units: str = "mm-N-s") -> dict[str,
     return values
 
 
-def format_real(value: float, width: int = FIELD) -> str:
-    """A real number right-aligned in ``width`` characters, as many digits as fit."""
-    for digits in range(width - 1, 0, -1):
+def format_real(value: float, width: int = FIELD, *, max_digits: int = 7) -> str:
+    """A real number right-aligned in ``width`` characters: ``max_digits`` significant
+    digits, fewer where they do not fit."""
+    for digits in range(min(max_digits, width - 1), 0, -1):
         for text in (f"{value:.{digits}g}", f"{value:.{digits}E}"):
             if len(text) <= width and _same(text, value, digits):
                 return text.rjust(width)
