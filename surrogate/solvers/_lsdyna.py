@@ -22,6 +22,7 @@ executable (see ``tests/solvers``). What is relied on:
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import re
@@ -301,14 +302,27 @@ class LsDynaSolver(Solver):
         "timeout_s",
         "keep_workdir",
         "workdir_root",
+        "template_sha256",
     )
 
     @classmethod
     def check_settings(cls, settings: Mapping[str, Any]) -> dict[str, Any]:
+        """Validated settings, with ``template_sha256`` (the template's content) added,
+        so an edited template never reuses a cached run; a template that changed
+        since its hash was taken is an error."""
         checked = super().check_settings(settings)
         template = checked.get("template")
         if not isinstance(template, str) or not template:
             raise InputDataError("[solver] template (the LS-DYNA keyword deck) is required")
+        try:
+            digest = hashlib.sha256(Path(template).read_bytes()).hexdigest()[:24]
+        except OSError as error:
+            raise InputDataError(f"[solver] template {template}: {error.strerror}") from None
+        if checked.setdefault("template_sha256", digest) != digest:
+            raise InputDataError(
+                f"[solver] template {template} changed since the study was loaded; "
+                "load the study again"
+            )
         if checked.get("fill", "parameter") not in ("parameter", "seatbelt_card"):
             raise InputDataError(
                 f"[solver] fill must be parameter or seatbelt_card, got {checked['fill']!r}"

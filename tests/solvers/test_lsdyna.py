@@ -12,6 +12,7 @@ from surrogate import InputDataError, Rig, simulate
 from surrogate._batch import solve_inputs, solver_inputs
 from surrogate.effects import ModelState
 from surrogate.solvers import (
+    LsDynaSolver,
     coating_parameters,
     fill_parameters,
     fill_seatbelt_card,
@@ -158,3 +159,20 @@ def test_command_from_the_environment_and_a_missing_program(tmp_path, monkeypatc
     result = solve_inputs(solver_inputs(POINT, Rig(), solver="lsdyna", solver_settings=settings))
     assert result["status"] == "failed"
     assert "no-such-lsdyna-binary: command not found" in result["reason"]
+
+
+def test_template_content_keys_the_cache_and_an_edit_is_caught(tmp_path):
+    template = tmp_path / "deck.k"
+    template.write_text(TEMPLATE.read_text())
+    settings = _settings(tmp_path, template=str(template))
+    # as loading a study does: the settings are checked once, the template hashed
+    checked = LsDynaSolver.check_settings(settings)
+    first = solver_inputs(POINT, Rig(), solver="lsdyna", solver_settings=checked)
+    template.write_text(TEMPLATE.read_text().replace("90.0", "45.0"))
+    checked = LsDynaSolver.check_settings(settings)
+    second = solver_inputs(POINT, Rig(), solver="lsdyna", solver_settings=checked)
+    assert (
+        first["solver_settings"]["template_sha256"] != second["solver_settings"]["template_sha256"]
+    )
+    result = solve_inputs(first)  # inputs hashed before the edit
+    assert result["status"] == "failed" and "changed since the study was loaded" in result["reason"]
