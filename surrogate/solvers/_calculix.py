@@ -58,7 +58,7 @@ __all__ = [
 ]
 
 SLICE_WIDTH_MM = 0.2
-DECK_VERSION = "ccx-deck-3"
+DECK_VERSION = "ccx-deck-4"
 """Bump whenever a change to the deck changes results (it keys the cache)."""
 JOB = "bending"
 
@@ -95,7 +95,7 @@ class CalculixMesh:
 
 CALCULIX_MESHES = {
     "fine": CalculixMesh(0.1, 0.4, 2.0, 1.0, 96, 1.0, 0.5),
-    "coarse": CalculixMesh(0.4, 0.4, 0.0, 2.0, 48, 2.0, 1.0),
+    "coarse": CalculixMesh(0.5, 0.5, 0.0, 2.0, 40, 3.0, 1.5),
 }
 
 

@@ -73,7 +73,7 @@ def test_materials_contact_and_step_carry_the_inputs():
     rotation = [line for line in blocks["*BOUNDARY"] if line.endswith(f"{-math.pi / 2:.12g}")]
     assert len(rotation) == 1  # the clamp's rotation node turns −90° about y
     increments = [float(v) for v in blocks["*STATIC"][0].split(",")]
-    assert increments[3] == pytest.approx(2.0 / 90.0)  # coarse: at most 2° per increment
+    assert increments[3] == pytest.approx(3.0 / 90.0)  # coarse: at most 3° per increment
     assert "*STEP, NLGEOM, INC=5000" in blocks
 
 
@@ -98,20 +98,23 @@ def test_dat_parser_on_real_ccx_output():
     """ccx 2.20 output of the coarse deck (fixtures/README.md)."""
     text = (FIXTURES / "ccx220_coarse_paper_optimum.dat").read_text()
     history = parse_calculix_dat(text)
-    assert history.time.size == text.count("total force (fx,fy,fz)") == 47
+    assert history.time.size == text.count("total force (fx,fy,fz)") == 32
     np.testing.assert_allclose(
-        history.probe_force_n[0], [-1.519233e-04, -2.449663e-09, -9.117093e-04]
+        history.probe_force_n[0], [-2.466778e-04, -3.148741e-09, -1.369525e-03]
     )
-    assert history.rotation_rad[0] == pytest.approx(-1.745329e-02)
+    assert history.rotation_rad[0] == pytest.approx(-2.617994e-02)
     assert history.time[-1] == 1.0 and history.rotation_rad[-1] == pytest.approx(-math.pi / 2)
     result = _curve(history, STATE)
     assert result["status"] == "ok"
     assert result["angle_deg"] == list(np.arange(91.0))
     # the magnitude over the full width at 90°: the fixture's last block × b/slice
     assert result["force_n"][90] == pytest.approx(
-        math.hypot(3.268331e-02, 5.679996e-02) * 38.0 / SLICE_WIDTH_MM
+        math.hypot(2.822191e-02, 5.755216e-02) * 38.0 / SLICE_WIDTH_MM
     )
-    assert np.all(np.diff(result["force_n"]) > 0)  # the elastic coat never saturates
+    # the coat never yields: the curve does not saturate (the coarse contact facets
+    # leave a ripple of a few 0.01 N near 90°, far below the 10 % secant criterion)
+    assert result["saturated"] is False and result["theta_sat_deg"] == 90.0
+    assert np.all(np.diff(result["force_n"][:80]) > 0)
 
 
 def test_a_history_that_stops_short_is_a_failed_run():

@@ -23,7 +23,7 @@ POINT = {"ecoat_gpa": 1.0, "scoat_gpa": 0.2, "tcoat_mm": 0.012}
 def test_coarse_run_agrees_with_the_builtin_solver(ccx, tmp_path):
     """Paper optimum, μ = 0.1. Tolerance 5 % on F60 and on the curve RMS (of the
     peak force): the 3-D model's coat strains are finite and its core has a
-    little stiffness of its own, the coarse mesh is ~1 % off the fine one
+    little stiffness of its own, the coarse mesh is 0.5 % (F60) to 5 % (90°) off the fine one
     (README, "External solvers")."""
     settings = {"mesh": "coarse", "workdir_root": str(tmp_path / "work"), "timeout_s": 900}
     result = solve_inputs(solver_inputs(POINT, Rig(), solver="calculix", solver_settings=settings))
