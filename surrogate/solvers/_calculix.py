@@ -187,7 +187,7 @@ class _Deck:
             for r in range(2)
             for y in range(2)
         ]
-        elements = [
+        elements: list[tuple[int, ...]] = [
             (
                 base + s,
                 nid(s, 0, 0),
