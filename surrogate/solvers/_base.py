@@ -15,6 +15,7 @@ without a shell from an argument list, and are killed at their timeout.
 from __future__ import annotations
 
 import os
+import shlex
 import shutil
 import subprocess
 import tempfile
@@ -34,6 +35,8 @@ from ..physics import curve_features
 __all__ = [
     "Solver",
     "available_solvers",
+    "check_common_settings",
+    "command_list",
     "curve_result",
     "failed_result",
     "get_solver",
@@ -203,3 +206,32 @@ def guarded(solve: Callable[[], dict[str, Any]]) -> dict[str, Any]:
         return solve()
     except (SolverError, InputDataError) as error:
         return failed_result(str(error))
+
+
+def check_common_settings(settings: Mapping[str, Any]) -> None:
+    """Check the settings every external solver shares (``timeout_s``, ``command``,
+    ``threads``, ``keep_workdir``); one line naming the key, the value and the rule."""
+    timeout = settings.get("timeout_s", 1.0)
+    if isinstance(timeout, bool) or not isinstance(timeout, int | float) or not timeout > 0:
+        raise InputDataError(f"[solver] timeout_s must be a number of seconds > 0, got {timeout!r}")
+    command = settings.get("command", "x")
+    if not command or not (
+        isinstance(command, str)
+        or (isinstance(command, list) and all(isinstance(a, str) for a in command))
+    ):
+        raise InputDataError(
+            f"[solver] command must be a program (with arguments) or a list of strings, "
+            f"got {command!r}"
+        )
+    threads = settings.get("threads", 1)
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise InputDataError(f"[solver] threads must be a whole number ≥ 1, got {threads!r}")
+    if not isinstance(settings.get("keep_workdir", False), bool):
+        raise InputDataError(
+            f"[solver] keep_workdir must be true or false, got {settings['keep_workdir']!r}"
+        )
+
+
+def command_list(command: str | Sequence[str]) -> list[str]:
+    """An argument list: a list as it is, a string split as a shell would (never run by one)."""
+    return [str(a) for a in command] if not isinstance(command, str) else shlex.split(command)

@@ -40,6 +40,8 @@ from .._errors import InputDataError, SolverError
 from ..effects import ModelState
 from ._base import (
     Solver,
+    check_common_settings,
+    command_list,
     curve_result,
     failed_result,
     guarded,
@@ -477,7 +479,7 @@ class CalculixSolver(Solver):
                 f"[solver] mesh must be one of {', '.join(CALCULIX_MESHES)}, "
                 f"got {checked['mesh']!r}"
             )
-        _check_common(checked)
+        check_common_settings(checked)
         return checked
 
     def solve(self, inputs: Mapping[str, Any]) -> dict[str, Any]:
@@ -491,7 +493,7 @@ class CalculixSolver(Solver):
         with work_directory(settings, prefix="ccx-") as workdir:
             (workdir / f"{JOB}.inp").write_text(deck, encoding="utf-8")
             done = run_command(
-                [str(settings.get("command", "ccx")), "-i", JOB],
+                [*command_list(settings.get("command", "ccx")), "-i", JOB],
                 cwd=workdir,
                 timeout_s=float(settings.get("timeout_s", 1800.0)),
                 env={"OMP_NUM_THREADS": threads, "CCX_NPROC_EQUATION_SOLVER": threads},
@@ -516,18 +518,6 @@ def _curve(history: CalculixHistory, state: ModelState) -> dict[str, Any]:
     magnitude = np.hypot(force[:, 0], force[:, 2])
     perpendicular = np.abs(force[:, 2])
     return curve_result(angle, magnitude, perpendicular, state.rig.max_angle_deg)
-
-
-def _check_common(settings: Mapping[str, Any]) -> None:
-    timeout = settings.get("timeout_s", 1.0)
-    if isinstance(timeout, bool) or not isinstance(timeout, int | float) or not timeout > 0:
-        raise InputDataError(f"[solver] timeout_s must be a number of seconds > 0, got {timeout!r}")
-    command = settings.get("command", "x")
-    if not isinstance(command, str | list) or not command:
-        raise InputDataError(f"[solver] command must be a program name or list, got {command!r}")
-    threads = settings.get("threads", 1)
-    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
-        raise InputDataError(f"[solver] threads must be a whole number ≥ 1, got {threads!r}")
 
 
 def write_deck(path: Path, inputs: Mapping[str, Any], *, mesh: str = "coarse") -> Path:

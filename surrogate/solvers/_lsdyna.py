@@ -26,7 +26,6 @@ import hashlib
 import math
 import os
 import re
-import shlex
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +37,8 @@ from .._errors import InputDataError, SolverError
 from ..effects import ModelState
 from ._base import (
     Solver,
+    check_common_settings,
+    command_list,
     curve_result,
     failed_result,
     guarded,
@@ -311,6 +312,7 @@ class LsDynaSolver(Solver):
         so an edited template never reuses a cached run; a template that changed
         since its hash was taken is an error."""
         checked = super().check_settings(settings)
+        check_common_settings(checked)
         template = checked.get("template")
         if not isinstance(template, str) or not template:
             raise InputDataError("[solver] template (the LS-DYNA keyword deck) is required")
@@ -390,8 +392,7 @@ class LsDynaSolver(Solver):
 
 
 def _command(settings: Mapping[str, Any]) -> list[str]:
-    command = settings.get("command") or os.environ.get(COMMAND_ENV) or "lsdyna"
-    return list(command) if isinstance(command, list) else shlex.split(str(command))
+    return command_list(settings.get("command") or os.environ.get(COMMAND_ENV) or "lsdyna")
 
 
 def _read(path: Path) -> str:
