@@ -2,6 +2,7 @@
 nodout parsers on files in the documented layouts, and the run path with a
 stand-in executable (LS-DYNA itself is not available here)."""
 
+import json
 import sys
 from pathlib import Path
 
@@ -176,3 +177,20 @@ def test_template_content_keys_the_cache_and_an_edit_is_caught(tmp_path):
     )
     result = solve_inputs(first)  # inputs hashed before the edit
     assert result["status"] == "failed" and "changed since the study was loaded" in result["reason"]
+
+
+def test_simulate_api_and_cli_with_an_external_solver(tmp_path, capsys):
+    """``surrogate simulate --solver lsdyna`` through the stand-in (not LS-DYNA)."""
+    from surrogate._cli import main
+
+    curve = simulate(**POINT, solver="lsdyna", solver_settings=_settings(tmp_path))
+    reference = simulate(**POINT)
+    assert curve.f60_n == pytest.approx(reference.f60_n, rel=1e-4)
+    assert np.isnan(curve.contact_arc_mm).all()  # an external solver does not report it
+    command = f"{sys.executable} {FIXTURES / 'fake_lsdyna.py'}"
+    args = ["simulate", "--ecoat", "1", "--scoat", "0.2", "--tcoat", "0.012", "--json"]
+    args += ["--solver", "lsdyna", "--solver-option", f"template={TEMPLATE}"]
+    args += ["--solver-option", f"command={command}"]
+    assert main(args) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["f60_n"] == pytest.approx(reference.f60_n, rel=1e-4)
