@@ -170,6 +170,9 @@ def main() -> None:
     )
     parser.add_argument("--calculix-mesh", choices=("coarse", "fine"), default="coarse")
     parser.add_argument("--calculix-seeds", type=int, default=1)
+    parser.add_argument(
+        "--calculix-targets", type=int, default=3, help="CalculiX row: the first N targets"
+    )
     args = parser.parse_args()
     methods = args.methods.split(",")
     targets = [surrogate.simulate(*p).f60_n for p in TARGET_POINTS]
@@ -183,7 +186,7 @@ def main() -> None:
     jobs += [("paper", t, 0, args.cap) for t in targets if "paper" in methods]
     jobs += [
         (f"calculix:{args.calculix_mesh}", t, s, args.cap)
-        for t in targets
+        for t in targets[: args.calculix_targets]
         for s in range(args.calculix_seeds)
         if "calculix" in methods
     ]
