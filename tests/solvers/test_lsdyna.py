@@ -194,3 +194,24 @@ def test_simulate_api_and_cli_with_an_external_solver(tmp_path, capsys):
     assert main(args) == 0
     payload = json.loads(capsys.readouterr().out)
     assert payload["f60_n"] == pytest.approx(reference.f60_n, rel=1e-4)
+
+
+def test_doe_runs_an_external_solver_through_the_pool_and_the_cache(tmp_path):
+    """A study with ``kind = "lsdyna"`` (the stand-in, not LS-DYNA): two worker
+    processes, every run cached by its input hash, a second batch solves nothing."""
+    import surrogate
+
+    command = [sys.executable, str(FIXTURES / "fake_lsdyna.py")]
+    (tmp_path / "s.toml").write_text(
+        '[study]\nname = "s"\n[targets]\nf60_n = 10.0\n'
+        f'[solver]\nkind = "lsdyna"\ntemplate = "{TEMPLATE}"\ncommand = {json.dumps(command)}\n'
+    )
+    kwargs = {"n": 4, "study": tmp_path / "s.toml", "run": True, "jobs": 2, "progress": False}
+    first = surrogate.doe("lhs", out=tmp_path / "a.csv", **kwargs)
+    assert (first.n_ok, first.solver_calls, first.cached) == (4, 4, 0)
+    again = surrogate.doe(
+        "lhs", out=tmp_path / "b.csv", cache_dir=tmp_path / ".solver-cache", **kwargs
+    )
+    assert (again.n_ok, again.solver_calls, again.cached) == (4, 0, 4)
+    samples = surrogate.SampleSet.read(tmp_path / "a.csv")
+    assert samples.meta["solver"] == "lsdyna"
