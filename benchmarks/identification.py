@@ -8,11 +8,15 @@ Side by side, over ``--seeds`` seeds and three targets:
   case by the F60 ratio, as one would by hand), reported with whether it met
   the target;
 - Optuna's TPESampler run directly on the full solver, same constraints;
-- random search on the full solver.
+- random search on the full solver;
+- ``calculix`` (not in the default ``--methods``: minutes per run): ours with
+  CalculiX (``--calculix-mesh``, coarse by default) as the full solver,
+  ``--calculix-seeds`` seeds per target, no identifiability runs.
 Direct searches stop at ``--cap`` calls; a run that never met the target counts
 as the cap (a lower bound, marked with ≥).
 
 Run: .venv/bin/python benchmarks/identification.py [--seeds 10] [--cap 200] [--jobs 2]
+CalculiX row: .venv/bin/python benchmarks/identification.py --methods calculix,paper
 """
 
 from __future__ import annotations
@@ -64,6 +68,24 @@ def ours(target: float, seed: int) -> tuple[int, bool, float]:
         import dataclasses
 
         spec = dataclasses.replace(_spec(target, seed), path=Path(folder) / "study.toml")
+        result = run(spec, storage=f"sqlite:///{folder}/b.db", progress=False)
+    calls = result.calls_to_verify if result.calls_to_verify is not None else result.solver_calls
+    return calls, result.status == "verified", time.perf_counter() - start
+
+
+def ours_calculix(target: float, seed: int, mesh: str) -> tuple[int, bool, float]:
+    import dataclasses
+
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory() as folder:
+        spec = _spec(target, seed)
+        spec = dataclasses.replace(
+            spec,
+            path=Path(folder) / "study.toml",
+            solver="calculix",
+            solver_settings={"mesh": mesh},
+            budget=dataclasses.replace(spec.budget, identifiability_runs=0),
+        )
         result = run(spec, storage=f"sqlite:///{folder}/b.db", progress=False)
     calls = result.calls_to_verify if result.calls_to_verify is not None else result.solver_calls
     return calls, result.status == "verified", time.perf_counter() - start
@@ -127,6 +149,8 @@ def paper(target: float) -> tuple[int, bool, float]:
 def _job(args):
     method, target, seed, cap = args
     warnings.filterwarnings("ignore")
+    if method.startswith("calculix:"):
+        return "calculix", target, seed, ours_calculix(target, seed, method.split(":")[1])
     if method == "ours":
         return method, target, seed, ours(target, seed)
     if method == "paper":
@@ -142,7 +166,12 @@ def main() -> None:
     parser.add_argument(
         "--methods",
         default="ours,paper,tpe,random",
-        help="comma-separated subset of ours, paper, tpe, random",
+        help="comma-separated subset of ours, paper, tpe, random, calculix",
+    )
+    parser.add_argument("--calculix-mesh", choices=("coarse", "fine"), default="coarse")
+    parser.add_argument("--calculix-seeds", type=int, default=1)
+    parser.add_argument(
+        "--calculix-targets", type=int, default=3, help="CalculiX row: the first N targets"
     )
     args = parser.parse_args()
     methods = args.methods.split(",")
@@ -155,6 +184,12 @@ def main() -> None:
         if m in methods
     ]
     jobs += [("paper", t, 0, args.cap) for t in targets if "paper" in methods]
+    jobs += [
+        (f"calculix:{args.calculix_mesh}", t, s, args.cap)
+        for t in targets[: args.calculix_targets]
+        for s in range(args.calculix_seeds)
+        if "calculix" in methods
+    ]
     with ProcessPoolExecutor(args.jobs) as pool:
         results = list(pool.map(_job, jobs))
     table: dict[str, list[tuple[int, bool, float]]] = {}
@@ -170,6 +205,7 @@ def main() -> None:
         ("paper", "paper (64 + 5)"),
         ("tpe", "TPE on the solver"),
         ("random", "random search"),
+        ("calculix", f"ours, CalculiX {args.calculix_mesh}"),
     ):
         if method not in table:
             continue
@@ -190,7 +226,7 @@ def main() -> None:
             f"median wall {statistics.median(r[2] for r in rows):.1f} s  "
             f"(calls: {' '.join(str(c) for c in calls)})"
         )
-    if len(medians) < 4:
+    if not {"paper", "ours", "tpe", "random"} <= set(medians):
         return
     print(
         f"ratios: paper/ours = {medians['paper'] / medians['ours']:.1f}x, "

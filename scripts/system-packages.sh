@@ -48,5 +48,17 @@ chromium_block() {
     fi
 }
 
+# -- CalculiX: the `ccx` solver of the CalculiX tests (tests/solvers, marker calculix) --
+calculix_block() {
+    if ! command -v ccx >/dev/null; then
+        _apt_install calculix-ccx
+    fi
+    if ! command -v ccx >/dev/null && [ "${CI:-}" = "true" ]; then
+        echo "system-packages: ccx is missing and CI requires it (apt-get install calculix-ccx as root)" >&2
+        return 1
+    fi
+}
+
 postgresql_block
 chromium_block
+calculix_block

@@ -13,16 +13,15 @@ import pandas as pd
 from tqdm import tqdm
 
 from ._cache import ResultCache, input_hash
-from ._errors import InputDataError, SolverError
+from ._errors import InputDataError
 from ._rig import Rig
 from ._samples import SampleSet
-from ._simulate import simulate
 from ._space import COATING_PARAMETERS, ParameterSpace
 from .physics import SOLVER_VERSION
 
 __all__ = ["evaluate_design", "solve_inputs", "solver_inputs"]
 
-SOLVERS = ("builtin",)
+SOLVERS = ("builtin", "calculix", "lsdyna")
 
 
 def solver_inputs(
@@ -32,12 +31,17 @@ def solver_inputs(
     solver: str = "builtin",
     effects: Mapping[str, Mapping[str, float]] | None = None,
     conditions: Mapping[str, Any] | None = None,
+    solver_settings: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Everything that determines a run's result, as plain JSON data.
 
     ``effects`` maps effect names to their parameter values and ``conditions``
     holds the test's conditions (see :func:`surrogate.simulate`); both enter
     the input hash, so a run at other conditions is never taken from the cache.
+    ``solver_settings`` (mesh, command, template, timeout, … of an external
+    solver, see :mod:`surrogate.solvers`) enter it too, as
+    ``inputs["solver_settings"]`` — only when there are any, so builtin hashes
+    stay what they were.
     """
     if solver not in SOLVERS:
         raise InputDataError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
@@ -46,9 +50,9 @@ def solver_inputs(
         raise InputDataError(
             f"a solver run needs {', '.join(COATING_PARAMETERS)}; missing {', '.join(missing)}"
         )
-    return {
+    inputs: dict[str, Any] = {
         "solver": solver,
-        "solver_version": SOLVER_VERSION,
+        "solver_version": _solver_version(solver),
         "params": {name: float(point[name]) for name in COATING_PARAMETERS},
         "rig": rig.to_dict(),
         "effects": {
@@ -60,32 +64,23 @@ def solver_inputs(
             for key, value in sorted((conditions or {}).items())
         },
     }
+    if solver_settings:
+        inputs["solver_settings"] = dict(sorted(solver_settings.items()))
+    return inputs
+
+
+def _solver_version(solver: str) -> str:
+    from .solvers import get_solver
+
+    return get_solver(solver).version or SOLVER_VERSION
 
 
 def solve_inputs(inputs: dict[str, Any]) -> dict[str, Any]:
-    """Run the solver on :func:`solver_inputs`; a failure is a result, not an exception."""
-    params = inputs["params"]
-    try:
-        curve = simulate(
-            params["ecoat_gpa"],
-            params["scoat_gpa"],
-            params["tcoat_mm"],
-            rig=Rig(**inputs["rig"]),
-            effects=inputs.get("effects") or None,
-            conditions=inputs.get("conditions") or None,
-        )
-    except (SolverError, InputDataError) as error:
-        return {"status": "failed", "reason": str(error)}
-    return {
-        "status": "ok",
-        "reason": "",
-        "f60_n": curve.f60_n,
-        "theta_sat_deg": curve.theta_sat_deg,
-        "saturated": curve.saturated,
-        "angle_deg": curve.angle_deg.tolist(),
-        "force_n": curve.force_n.tolist(),
-        "force_perp_n": curve.force_perp_n.tolist(),
-    }
+    """Run the solver named by ``inputs["solver"]`` (:func:`surrogate.solvers.get_solver`)
+    on :func:`solver_inputs`; a failure is a result, not an exception."""
+    from .solvers import get_solver
+
+    return get_solver(inputs.get("solver", "builtin")).solve(inputs)
 
 
 def evaluate_design(
@@ -94,6 +89,7 @@ def evaluate_design(
     *,
     rig: Rig | None = None,
     solver: str = "builtin",
+    solver_settings: Mapping[str, Any] | None = None,
     jobs: int = 1,
     cache_dir: str | Path | None = None,
     progress: bool = True,
@@ -119,7 +115,10 @@ def evaluate_design(
         raise InputDataError(f"jobs must be a whole number ≥ 1, got {jobs!r}")
     cache = ResultCache(cache_dir) if cache_dir is not None else None
     points = design[list(space.names)].to_dict("records")
-    inputs = [solver_inputs(point, rig, solver=solver) for point in points]
+    inputs = [
+        solver_inputs(point, rig, solver=solver, solver_settings=solver_settings)
+        for point in points
+    ]
     keys = [input_hash(item) for item in inputs]
     results: dict[int, dict[str, Any]] = {}
     for index, key in enumerate(keys):
@@ -147,7 +146,7 @@ def evaluate_design(
         bar.close()
     provenance = {
         "solver": solver,
-        "solver_version": SOLVER_VERSION,
+        "solver_version": _solver_version(solver),
         "rig": rig.to_dict(),
         "solver_calls": len(todo),
         **(meta or {}),

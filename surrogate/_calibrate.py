@@ -218,6 +218,7 @@ class CalibrationProblem:
             solver=self.spec.solver,
             effects=effects,
             conditions=self.groups[group],
+            solver_settings=self.spec.solver_settings,
         )
 
     # -- misfit --------------------------------------------------------------------------------

@@ -90,6 +90,19 @@ def _build_parser() -> argparse.ArgumentParser:
         metavar="MODULE",
         help="import a module of your own effects first (repeatable)",
     )
+    sim.add_argument(
+        "--solver",
+        choices=("builtin", "calculix", "lsdyna"),
+        default="builtin",
+        help="full solver (default: builtin)",
+    )
+    sim.add_argument(
+        "--solver-option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a setting of an external solver, e.g. mesh=fine, timeout_s=600 (repeatable)",
+    )
     sim.add_argument("--out", type=Path, help="write angle_deg,force_n,force_perp_n to this CSV")
     sim.add_argument("--json", action="store_true", help="print one JSON object")
     sim.set_defaults(handler=_simulate)
@@ -183,6 +196,21 @@ def _build_parser() -> argparse.ArgumentParser:
     comp.add_argument("--no-plots", action="store_true", help="write no PNG files")
     comp.add_argument("--json", action="store_true", help="print one JSON object")
     comp.set_defaults(handler=_compare)
+    exporting = commands.add_parser(
+        "export", help="the verified optimum of a study as LS-DYNA keyword text"
+    )
+    exporting.add_argument("study", type=Path, help="study file (after surrogate run)")
+    exporting.add_argument("--format", choices=("lsdyna",), default="lsdyna", help="output format")
+    exporting.add_argument("--output", type=Path, help="write the snippet to this file")
+    exporting.add_argument("--storage", help="Optuna storage URL (default: the study's)")
+    exporting.add_argument(
+        "--units",
+        choices=("mm-N-s", "mm-kg-ms", "m-kg-s"),
+        default="mm-N-s",
+        help="unit system of your deck (default mm-N-s: MPa)",
+    )
+    exporting.add_argument("--json", action="store_true", help="print one JSON object")
+    exporting.set_defaults(handler=_export)
 
     board = commands.add_parser("dashboard", help="optuna-dashboard of a study, on 127.0.0.1")
     board.add_argument("study", type=Path, help="study file")
@@ -345,6 +373,21 @@ def _dashboard(args: argparse.Namespace) -> int:
     return 0
 
 
+def _export(args: argparse.Namespace) -> int:
+    from ._export import export
+
+    result = export(
+        args.study, format=args.format, output=args.output, storage=args.storage, units=args.units
+    )
+    if args.json:
+        _print_json(result.to_json())
+    elif args.output is None:
+        print(result.text, end="")
+    else:
+        print(f"verify trial #{result.trial_number} of {result.study} written to {result.output}")
+    return 0
+
+
 def _target(text: str) -> float:
     name, _, value = text.partition("=")
     if name != "f60_n" or not value:
@@ -478,6 +521,26 @@ def _parse_conditions(items: list[str]) -> dict[str, object]:
     return conditions
 
 
+def _parse_solver_options(items: list[str]) -> dict[str, object]:
+    options: dict[str, object] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise InputDataError(f"--solver-option {item!r}: expected KEY=VALUE, e.g. mesh=fine")
+        value: object = text.strip()
+        if text.strip().lower() in ("true", "false"):
+            value = text.strip().lower() == "true"
+        else:
+            for kind in (int, float):
+                try:
+                    value = kind(text)
+                    break
+                except ValueError:
+                    pass
+        options[key.strip()] = value
+    return options
+
+
 def _simulate(args: argparse.Namespace) -> int:
     from .effects import load_plugin
 
@@ -490,6 +553,8 @@ def _simulate(args: argparse.Namespace) -> int:
         rig=_rig_from(args),
         effects=_parse_effects(args.effect),
         conditions=_parse_conditions(args.condition),
+        solver=args.solver,
+        solver_settings=_parse_solver_options(args.solver_option),
     )
     if args.out is not None:
         atomic_write_text(args.out, _curve_csv(curve))

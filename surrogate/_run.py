@@ -281,7 +281,12 @@ class _Verifier:
 
     def _solve(self, params: dict[str, float], *, phase: str) -> dict[str, Any]:
         """One full-solver run as a trial; a finished run is never repeated."""
-        inputs = solver_inputs(params, self.spec.rig, solver=self.spec.solver)
+        inputs = solver_inputs(
+            params,
+            self.spec.rig,
+            solver=self.spec.solver,
+            solver_settings=self.spec.solver_settings,
+        )
         key = input_hash(inputs)
         if key not in self.records and self.dispatch is not None:
             self.records.update(self.dispatch(self.study, [params], phase))

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from ._conditions import check_conditions, rig_for
-from ._errors import InputDataError
+from ._errors import InputDataError, SolverError
 from ._rig import Rig
 from ._units import gpa_to_mpa
 from ._validate import check_positive
@@ -83,8 +83,10 @@ def simulate(
     rig: Rig | None = None,
     effects: Mapping[str, Mapping[str, float]] | None = None,
     conditions: Mapping[str, Any] | None = None,
+    solver: str = "builtin",
+    solver_settings: Mapping[str, Any] | None = None,
 ) -> BendingCurve:
-    """Run the built-in full solver of the 2-point bending test.
+    """Run a full solver of the 2-point bending test (the built-in one by default).
 
     Parameters
     ----------
@@ -100,6 +102,11 @@ def simulate(
     conditions : mapping, optional
         Conditions of the test: ``tension_n``, ``direction`` (warp/weft),
         ``rate_deg_s``, ``bending_length_mm``, ``width_mm``.
+    solver : {"builtin", "calculix", "lsdyna"}
+        The full solver (:mod:`surrogate.solvers`); an external one reports
+        no contact arc or clamp moment (NaN).
+    solver_settings : mapping, optional
+        Settings of an external solver, e.g. ``{"mesh": "fine"}``.
 
     Returns
     -------
@@ -113,6 +120,10 @@ def simulate(
         The solver did not converge (the message names the angle).
     """
     rig = Rig() if rig is None else rig
+    if solver != "builtin" or solver_settings:
+        return _external(
+            solver, (ecoat_gpa, scoat_gpa, tcoat_mm), rig, effects, conditions, solver_settings
+        )
     enabled = {name: get_effect(name) for name in (effects or {})}
     reads = [column for effect in enabled.values() for column in effect.reads]
     checked = check_conditions(conditions, read_by_effects=reads)
@@ -162,4 +173,48 @@ def simulate(
         scoat_gpa=float(scoat_gpa),
         tcoat_mm=float(tcoat_mm),
         rig=rig,
+    )
+
+
+def _external(
+    solver: str,
+    coating: tuple[float, float, float],
+    rig: Rig,
+    effects: Mapping[str, Mapping[str, float]] | None,
+    conditions: Mapping[str, Any] | None,
+    settings: Mapping[str, Any] | None,
+) -> BendingCurve:
+    """One run of a solver of :mod:`surrogate.solvers`; bad input raises before it starts."""
+    from ._batch import solver_inputs
+    from .solvers import get_solver
+    from .solvers._base import model_state
+
+    adapter = get_solver(solver)
+    point = dict(zip(("ecoat_gpa", "scoat_gpa", "tcoat_mm"), coating, strict=True))
+    inputs = solver_inputs(
+        point,
+        rig,
+        solver=solver,
+        effects=effects,
+        conditions=conditions,
+        solver_settings=adapter.check_settings(settings or {}),
+    )
+    state = model_state(inputs)
+    result = adapter.solve(inputs)
+    if result["status"] != "ok":
+        raise SolverError(f"{solver}: {result['reason']}")
+    angle = np.asarray(result["angle_deg"], dtype=float)
+    return BendingCurve(
+        angle_deg=angle,
+        force_n=np.asarray(result["force_n"], dtype=float),
+        force_perp_n=np.asarray(result["force_perp_n"], dtype=float),
+        f60_n=result["f60_n"],
+        theta_sat_deg=result["theta_sat_deg"],
+        saturated=result["saturated"],
+        contact_arc_mm=np.full_like(angle, np.nan),
+        clamp_moment_nmm=np.full_like(angle, np.nan),
+        ecoat_gpa=float(coating[0]),
+        scoat_gpa=float(coating[1]),
+        tcoat_mm=float(coating[2]),
+        rig=state.rig,
     )

@@ -20,7 +20,7 @@ from ._space import COATING_PARAMETERS, PAPER_SPACE, ParameterSpace, ParameterSp
 __all__ = ["Budget", "Constraints", "StudySpec", "Targets", "load_study"]
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
-SOLVER_KINDS = ("builtin",)
+SOLVER_KINDS = ("builtin", "calculix", "lsdyna")
 _UNITS = {"ecoat_gpa": "GPa", "scoat_gpa": "GPa", "tcoat_mm": "mm"}
 _SECTIONS = (
     "study",
@@ -75,6 +75,7 @@ class StudySpec:
     path: Path | None
     seed: int = 0
     solver: str = "builtin"
+    solver_settings: dict[str, Any] = field(default_factory=dict)
     rig: Rig = field(default_factory=Rig)
     space: ParameterSpace = PAPER_SPACE
     targets: Targets = field(default_factory=Targets)
@@ -125,13 +126,7 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
     storage = study.get("storage")
     if storage is not None and not isinstance(storage, str):
         raise InputDataError(f"{where}: [study] storage must be a URL string, got {storage!r}")
-    solver = _section(data, "solver", where)
-    _only(solver, ("kind",), where, "solver")
-    kind = solver.get("kind", "builtin")
-    if kind not in SOLVER_KINDS:
-        raise InputDataError(
-            f"{where}: [solver] kind must be one of {', '.join(SOLVER_KINDS)}, got {kind!r}"
-        )
+    kind, solver_settings = _solver(_section(data, "solver", where), where, path)
     rig = _rig(_section(data, "rig", where), where)
     space = _space(_section(data, "parameters", where), where)
     targets, measurements = _targets(data, where, path)
@@ -169,6 +164,7 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
         path=path,
         seed=seed,
         solver=kind,
+        solver_settings=solver_settings,
         rig=rig,
         space=space,
         targets=targets,
@@ -180,6 +176,26 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
         budget=budget,
         storage=storage,
     )
+
+
+def _solver(section: dict[str, Any], where: str, path: Path | None) -> tuple[str, dict[str, Any]]:
+    """``[solver]``: the kind and its validated settings (see :mod:`surrogate.solvers`)."""
+    from .solvers import get_solver
+
+    settings = dict(section)
+    kind = settings.pop("kind", "builtin")
+    if kind not in SOLVER_KINDS:
+        raise InputDataError(
+            f"{where}: [solver] kind must be one of {', '.join(SOLVER_KINDS)}, got {kind!r}"
+        )
+    base = path.parent if path is not None else Path.cwd()
+    for key in ("template", "workdir_root"):
+        if isinstance(settings.get(key), str):
+            settings[key] = str((base / settings[key]).resolve())
+    try:
+        return kind, get_solver(kind).check_settings(settings)
+    except InputDataError as error:
+        raise InputDataError(f"{where}: {error}") from None
 
 
 def _section(data: dict[str, Any], name: str, where: str) -> dict[str, Any]:

@@ -121,6 +121,8 @@ def doe(
         points,
         space,
         rig=rig,
+        solver=spec.solver if spec is not None else "builtin",
+        solver_settings=spec.solver_settings if spec is not None else None,
         jobs=jobs,
         cache_dir=cache,
         progress=progress,

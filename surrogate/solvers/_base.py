@@ -1,0 +1,239 @@
+"""The full-solver interface, its registry, and what every adapter shares.
+
+A solver turns the plain-JSON inputs of :func:`surrogate._batch.solver_inputs`
+into a plain-JSON result: ``status`` (``ok``/``failed``), ``reason``, the
+features ``f60_n``, ``theta_sat_deg``, ``saturated`` (always from
+:func:`surrogate.physics.curve_features`) and the curve on whole degrees
+(``angle_deg``, ``force_n``, ``force_perp_n``). A failure is a result, never an
+exception, so one bad point does not stop a batch.
+
+External solvers run in a working directory of their own (a temporary one,
+removed afterwards unless the settings say ``keep_workdir``), are started
+without a shell from an argument list, and are killed at their timeout.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from .._errors import InputDataError, SolverError
+from .._rig import Rig
+from .._simulate import coating_state
+from ..effects import ModelState, get_effect
+from ..physics import curve_features
+
+__all__ = [
+    "Solver",
+    "available_solvers",
+    "check_common_settings",
+    "command_list",
+    "curve_result",
+    "failed_result",
+    "get_solver",
+    "model_state",
+    "register_solver",
+    "run_command",
+    "work_directory",
+]
+
+
+class Solver:
+    """Base class of full solvers.
+
+    Subclasses set :attr:`name`, :attr:`version` (bump it when results change:
+    it keys the result cache) and :attr:`settings_keys` (the keys allowed in
+    ``inputs["solver_settings"]``), and implement :meth:`solve`.
+    """
+
+    name: ClassVar[str] = ""
+    version: ClassVar[str] = ""
+    settings_keys: ClassVar[tuple[str, ...]] = ()
+
+    def solve(self, inputs: Mapping[str, Any]) -> dict[str, Any]:  # pragma: no cover
+        """One run; ``inputs`` as made by :func:`surrogate._batch.solver_inputs`."""
+        raise NotImplementedError
+
+    @classmethod
+    def check_settings(cls, settings: Mapping[str, Any]) -> dict[str, Any]:
+        """Validated settings (unknown keys are refused); override to check values."""
+        unknown = sorted(set(settings) - set(cls.settings_keys))
+        if unknown:
+            allowed = ", ".join(cls.settings_keys) or "none"
+            raise InputDataError(
+                f"[solver] {', '.join(unknown)} is not a setting of the {cls.name} solver; "
+                f"allowed: {allowed}"
+            )
+        return dict(settings)
+
+
+_REGISTRY: dict[str, type[Solver]] = {}
+
+
+def register_solver(cls: type[Solver]) -> type[Solver]:
+    """Class decorator: make ``cls`` available as ``[solver] kind = cls.name``."""
+    _REGISTRY[cls.name] = cls
+    return cls
+
+
+def available_solvers() -> tuple[str, ...]:
+    return tuple(_REGISTRY)
+
+
+def get_solver(kind: str) -> Solver:
+    """The solver registered under ``kind`` (an InputDataError names the choices)."""
+    if kind not in _REGISTRY:
+        raise InputDataError(
+            f"solver must be one of {', '.join(_REGISTRY)}, got {kind!r}; "
+            "set [solver] kind or --solver"
+        )
+    return _REGISTRY[kind]()
+
+
+# -- shared pieces ----------------------------------------------------------------------------
+def model_state(inputs: Mapping[str, Any]) -> ModelState:
+    """The model state of one run: coating in MPa/mm, the rig of its conditions,
+    every effect applied (the same path as :func:`surrogate.simulate`)."""
+    from .._conditions import check_conditions, rig_for
+
+    params = inputs["params"]
+    enabled = {name: get_effect(name) for name in inputs.get("effects") or {}}
+    reads = [column for effect in enabled.values() for column in effect.reads]
+    conditions = check_conditions(inputs.get("conditions") or None, read_by_effects=reads)
+    rig = rig_for(Rig(**inputs["rig"]), conditions)
+    state = coating_state(params["ecoat_gpa"], params["scoat_gpa"], params["tcoat_mm"], rig)
+    for name, values in (inputs.get("effects") or {}).items():
+        effect = enabled[name]
+        state = effect.apply(state, effect.resolve(values), conditions)
+    return state
+
+
+def failed_result(reason: str) -> dict[str, Any]:
+    return {"status": "failed", "reason": reason}
+
+
+def curve_result(
+    angle_deg: np.ndarray, force_n: np.ndarray, force_perp_n: np.ndarray, max_angle_deg: float
+) -> dict[str, Any]:
+    """Resample a solver history to whole degrees and attach its features.
+
+    Parameters
+    ----------
+    angle_deg : ndarray, shape (n,)
+        Rotations at which the solver reported, increasing [deg].
+    force_n, force_perp_n : ndarray, shape (n,)
+        Resultant probe force and its component perpendicular to the
+        undeformed strip, full specimen width [N].
+    max_angle_deg : float
+        The rig's range; a history that stops short of it is a failed run.
+    """
+    angle = np.asarray(angle_deg, dtype=float)
+    end = np.floor(max_angle_deg)
+    if angle.size < 2 or angle[-1] < end - 1e-3:
+        reached = float(angle[-1]) if angle.size else 0.0
+        return failed_result(f"the solver stopped at {reached:.2f}° of {end:g}°")
+    angle[-1] = max(angle[-1], end)  # printed rotations carry ~7 digits
+    if angle[0] > 0.0:  # the test has no preload: zero force at 0°
+        angle = np.concatenate(([0.0], angle))
+        force_n = np.concatenate(([0.0], force_n))
+        force_perp_n = np.concatenate(([0.0], force_perp_n))
+    grid = np.arange(0.0, end + 1.0)
+    force = np.interp(grid, angle, force_n)
+    perp = np.interp(grid, angle, force_perp_n)
+    features = curve_features(grid, force)
+    return {
+        "status": "ok",
+        "reason": "",
+        "f60_n": features.f60_n,
+        "theta_sat_deg": features.theta_sat_deg,
+        "saturated": features.saturated,
+        "angle_deg": grid.tolist(),
+        "force_n": force.tolist(),
+        "force_perp_n": perp.tolist(),
+    }
+
+
+@contextmanager
+def work_directory(settings: Mapping[str, Any], *, prefix: str) -> Iterator[Path]:
+    """A fresh working directory under ``settings["workdir_root"]`` (or the system
+    temp dir), removed afterwards unless ``settings["keep_workdir"]`` is true."""
+    root = settings.get("workdir_root")
+    if root is not None:
+        Path(root).mkdir(parents=True, exist_ok=True)
+    path = Path(tempfile.mkdtemp(prefix=prefix, dir=root))
+    try:
+        yield path
+    finally:
+        if not settings.get("keep_workdir", False):
+            shutil.rmtree(path, ignore_errors=True)
+
+
+def run_command(
+    args: Sequence[str],
+    *,
+    cwd: Path,
+    timeout_s: float,
+    env: Mapping[str, str] | None = None,
+) -> subprocess.CompletedProcess[str]:
+    """Run ``args`` (no shell) in ``cwd``; a timeout or a missing program is a SolverError."""
+    try:
+        return subprocess.run(
+            list(args),
+            cwd=cwd,
+            env={**os.environ, **(env or {})},
+            capture_output=True,
+            text=True,
+            errors="replace",
+            timeout=timeout_s,
+            check=False,
+        )
+    except subprocess.TimeoutExpired:
+        raise SolverError(f"{args[0]} did not finish within {timeout_s:g} s (timeout_s)") from None
+    except FileNotFoundError:
+        raise SolverError(f"{args[0]}: command not found; install it or set its path") from None
+
+
+def guarded(solve: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+    """Call ``solve``; SolverError and InputDataError become a failed result."""
+    try:
+        return solve()
+    except (SolverError, InputDataError) as error:
+        return failed_result(str(error))
+
+
+def check_common_settings(settings: Mapping[str, Any]) -> None:
+    """Check the settings every external solver shares (``timeout_s``, ``command``,
+    ``threads``, ``keep_workdir``); one line naming the key, the value and the rule."""
+    timeout = settings.get("timeout_s", 1.0)
+    if isinstance(timeout, bool) or not isinstance(timeout, int | float) or not timeout > 0:
+        raise InputDataError(f"[solver] timeout_s must be a number of seconds > 0, got {timeout!r}")
+    command = settings.get("command", "x")
+    if not command or not (
+        isinstance(command, str)
+        or (isinstance(command, list) and all(isinstance(a, str) for a in command))
+    ):
+        raise InputDataError(
+            f"[solver] command must be a program (with arguments) or a list of strings, "
+            f"got {command!r}"
+        )
+    threads = settings.get("threads", 1)
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise InputDataError(f"[solver] threads must be a whole number ≥ 1, got {threads!r}")
+    if not isinstance(settings.get("keep_workdir", False), bool):
+        raise InputDataError(
+            f"[solver] keep_workdir must be true or false, got {settings['keep_workdir']!r}"
+        )
+
+
+def command_list(command: str | Sequence[str]) -> list[str]:
+    """An argument list: a list as it is, a string split as a shell would (never run by one)."""
+    return [str(a) for a in command] if not isinstance(command, str) else shlex.split(command)

@@ -1,0 +1,130 @@
+"""CalculiX deck writer and .dat parser (no ccx needed)."""
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from surrogate import InputDataError, Rig
+from surrogate.effects import ModelState
+from surrogate.solvers import CALCULIX_MESHES, calculix_deck, parse_calculix_dat
+from surrogate.solvers._calculix import SLICE_WIDTH_MM, _curve, _Deck, ccx_failure
+
+FIXTURES = Path(__file__).parent / "fixtures"
+STATE = ModelState(1000.0, 200.0, 0.012, Rig())
+
+
+def _blocks(deck: str) -> dict[str, list[str]]:
+    """Keyword line → its data lines (first occurrence of each keyword line)."""
+    blocks: dict[str, list[str]] = {}
+    current = None
+    for line in deck.splitlines():
+        if line.startswith("**"):
+            continue
+        if line.startswith("*"):
+            current = line
+            blocks.setdefault(current, [])
+        elif current is not None:
+            blocks[current].append(line)
+    return blocks
+
+
+def _signed_volume(corners: np.ndarray) -> float:
+    """Triple product of the edges 1-2, 1-4, 1-5 of a brick (positive: valid ordering)."""
+    return float(np.dot(np.cross(corners[1] - corners[0], corners[3] - corners[0]),
+                        corners[4] - corners[0]))  # fmt: skip
+
+
+@pytest.mark.parametrize("mesh", sorted(CALCULIX_MESHES))
+def test_every_element_has_a_positive_jacobian(mesh):
+    deck = _Deck(STATE, CALCULIX_MESHES[mesh])
+    xyz = {node: np.array(c) for node, *c in deck.strip_nodes()}
+    probe_nodes, probe_elements = deck.probe()
+    xyz.update({node: np.array(c) for node, *c in probe_nodes})
+    bricks = [e for layer in deck.strip_elements().values() for e in layer] + probe_elements
+    volumes = [_signed_volume(np.array([xyz[n] for n in e[1:9]])) for e in bricks]
+    assert min(volumes) > 0.0
+    for element in (e for layer in deck.strip_elements().values() for e in layer):
+        assert len(set(element[1:])) == 20 and all(n in xyz for n in element[1:])
+
+
+def test_layers_follow_the_coat_core_coat_section():
+    deck = _Deck(STATE, CALCULIX_MESHES["coarse"])
+    xyz = {node: np.array(c) for node, *c in deck.strip_nodes()}
+    for layer, (low, high) in {
+        "BOTCOAT": (-0.6, -0.588),
+        "CORE": (-0.588, 0.588),
+        "TOPCOAT": (0.588, 0.6),
+    }.items():
+        z = np.array([[xyz[n][2] for n in e[1:]] for e in deck.strip_elements()[layer]])
+        assert z.min() == pytest.approx(low) and z.max() == pytest.approx(high)
+    y = np.array([c[1] for c in xyz.values()])
+    assert y.min() == 0.0 and y.max() == pytest.approx(SLICE_WIDTH_MM)
+
+
+def test_materials_contact_and_step_carry_the_inputs():
+    blocks = _blocks(calculix_deck(STATE, mesh="coarse"))
+    assert blocks["*ELASTIC"][0] == "1000, 0."  # Ecoat [MPa], ν = 0
+    assert blocks["*PLASTIC"] == ["200, 0."]  # Scoat, ideal plastic
+    assert blocks["*FRICTION"] == ["0.1, 100"]  # μ, stick slope K/10
+    assert blocks["*SURFACE BEHAVIOR, PRESSURE-OVERCLOSURE=LINEAR"] == ["1000"]
+    rotation = [line for line in blocks["*BOUNDARY"] if line.endswith(f"{-math.pi / 2:.12g}")]
+    assert len(rotation) == 1  # the clamp's rotation node turns −90° about y
+    increments = [float(v) for v in blocks["*STATIC"][0].split(",")]
+    assert increments[3] == pytest.approx(3.0 / 90.0)  # coarse: at most 3° per increment
+    assert "*STEP, NLGEOM, INC=5000" in blocks
+
+
+def test_hardening_friction_and_end_load_options():
+    state = ModelState(1000.0, 200.0, 0.012, Rig(friction=0.0, tension_n=19.0), 0.05)
+    blocks = _blocks(calculix_deck(state, mesh="coarse"))
+    # linear hardening: H = E·r/(1 − r) against plastic strain
+    assert blocks["*PLASTIC"] == ["200, 0.", f"{200 + 1000 * 0.05 / 0.95:.9g}, 1."]
+    assert "*FRICTION" not in blocks
+    loads = [float(line.split(",")[2]) for line in blocks["*CLOAD"]]
+    assert sum(loads) == pytest.approx(19.0 * SLICE_WIDTH_MM / 38.0)  # the slice's share
+
+
+def test_bad_mesh_and_unsupported_effect_are_input_errors():
+    with pytest.raises(InputDataError, match="mesh must be one of"):
+        calculix_deck(STATE, mesh="medium")
+    with pytest.raises(InputDataError, match="membrane_bending"):
+        calculix_deck(STATE.replace(extra_stiffness_nmm=1.0), mesh="coarse")
+
+
+def test_dat_parser_on_real_ccx_output():
+    """ccx 2.20 output of the coarse deck (fixtures/README.md)."""
+    text = (FIXTURES / "ccx220_coarse_paper_optimum.dat").read_text()
+    history = parse_calculix_dat(text)
+    assert history.time.size == text.count("total force (fx,fy,fz)") == 32
+    np.testing.assert_allclose(
+        history.probe_force_n[0], [-2.466778e-04, -3.148741e-09, -1.369525e-03]
+    )
+    assert history.rotation_rad[0] == pytest.approx(-2.617994e-02)
+    assert history.time[-1] == 1.0 and history.rotation_rad[-1] == pytest.approx(-math.pi / 2)
+    result = _curve(history, STATE)
+    assert result["status"] == "ok"
+    assert result["angle_deg"] == list(np.arange(91.0))
+    # the magnitude over the full width at 90°: the fixture's last block × b/slice
+    assert result["force_n"][90] == pytest.approx(
+        math.hypot(2.822191e-02, 5.755216e-02) * 38.0 / SLICE_WIDTH_MM
+    )
+    # the coat never yields: the curve does not saturate (the coarse contact facets
+    # leave a ripple of a few 0.01 N near 90°, far below the 10 % secant criterion)
+    assert result["saturated"] is False and result["theta_sat_deg"] == 90.0
+    assert np.all(np.diff(result["force_n"][:80]) > 0)
+
+
+def test_a_history_that_stops_short_is_a_failed_run():
+    text = (FIXTURES / "ccx220_coarse_paper_optimum.dat").read_text()
+    cut = text[: [m.start() for m in re.finditer(" total force", text)][20]]
+    result = _curve(parse_calculix_dat(cut), STATE)
+    assert result["status"] == "failed" and "stopped at" in result["reason"]
+
+
+def test_ccx_reason_is_its_first_error_line():
+    stdout = "increment 12 attempt 5\n *ERROR: too many cutbacks\n best solution and residuals\n"
+    assert ccx_failure(stdout, 201) == "*ERROR: too many cutbacks"
+    assert ccx_failure("Job finished\n", 1) == "ccx exited with code 1 (Job finished)"
