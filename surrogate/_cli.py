@@ -212,6 +212,15 @@ def _build_parser() -> argparse.ArgumentParser:
     exporting.add_argument("--json", action="store_true", help="print one JSON object")
     exporting.set_defaults(handler=_export)
 
+    diag = commands.add_parser(
+        "diagnose", help="where the model fails and which physical effect is missing"
+    )
+    diag.add_argument("study", type=Path, help="study file with [measurements]")
+    _model_options(diag)
+    diag.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
+    diag.add_argument("--json", action="store_true", help="print one JSON object")
+    diag.set_defaults(handler=_diagnose)
+
     board = commands.add_parser("dashboard", help="optuna-dashboard of a study, on 127.0.0.1")
     board.add_argument("study", type=Path, help="study file")
     board.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
@@ -281,6 +290,51 @@ def _parse_params(text: str | None) -> dict[str, float] | None:
                 f"--params {pair!r}: expected NAME=NUMBER[,NAME=NUMBER], e.g. ecoat_gpa=1.2"
             )
     return params
+
+
+def _diagnose(args: argparse.Namespace) -> int:
+    from ._diagnose import diagnose, write_ladder_plot
+    from ._study import load_study
+
+    result = diagnose(
+        args.study,
+        effects=args.effect,
+        plugins=args.plugin,
+        storage=args.storage,
+        progress=not args.json,
+    )
+    spec = load_study(args.study)
+    plot = write_ladder_plot(result.ladder, spec.directory / f"{spec.name}-compare" / "ladder.png")
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    state = "systematic" if result.systematic else "within the noise"
+    print(
+        f"RMSE {result.rmse_n:.4g} N (held-out {result.heldout_rmse_n:.4g} N), noise "
+        f"{result.noise_n:.4g} N: {state} (p = {result.p_value:.2g})"
+    )
+    for cell in result.where[:6]:
+        print(f"  fails at {cell['kind']} {cell['name']}: RMSE {cell['rmse_n']:.3g} N")
+    follows = [f["covariate"] for f in result.follows if f["significant"]]
+    print("residual follows: " + (", ".join(follows) if follows else "nothing recorded"))
+    print(f"{'added effect':>18} {'RMSE [N]':>9} {'held-out':>9} {'ΔBIC':>8}")
+    for entry in result.ranking:
+        print(
+            f"{entry['effect']:>18} {entry['rmse_n']:9.4f} {entry['heldout_rmse_n']:9.4g} "
+            f"{entry['delta_bic']:8.1f}"
+        )
+    print(result.verdict)
+    print("model ladder:")
+    for step in result.ladder:
+        held = step["heldout_rmse_n"]
+        print(
+            f"  {step['model']:>18}: RMSE {step['rmse_n']:.4g} N"
+            + (f", held-out {held:.4g} N" if held is not None else "")
+            + f", {step['solver_calls']} solver calls"
+        )
+    if plot is not None:
+        print(f"plot: {plot}")
+    return 0
 
 
 def _compare(args: argparse.Namespace) -> int:

@@ -56,6 +56,7 @@ class MeasurementSet:
     conditions: tuple[str, ...]
     covariates: tuple[str, ...]
     noise_n: float | None
+    noise_dof: int = 0
 
     def curve(self, test_id: Any) -> tuple[np.ndarray, np.ndarray]:
         rows = self.curves[self.curves.test_id == test_id]
@@ -118,7 +119,7 @@ def measurements_from(table: pd.DataFrame, *, where: str = "measurements") -> Me
         tests,
         conditions,
         covariates,
-        _replicate_noise(table, tests, conditions),
+        *_replicate_noise(table, tests, conditions),
     )
 
 
@@ -164,8 +165,9 @@ def _check_tests(table: pd.DataFrame, constant: tuple[str, ...], where: str) -> 
 
 def _replicate_noise(
     table: pd.DataFrame, tests: pd.DataFrame, keys: tuple[str, ...]
-) -> float | None:
-    """Pooled standard deviation of replicates at common angles, or None."""
+) -> tuple[float | None, int]:
+    """Pooled standard deviation of replicates at common angles (or None), and its
+    degrees of freedom."""
     groups = tests.groupby(list(keys), dropna=False).test_id if keys else [(None, tests.test_id)]
     squares, dof = 0.0, 0
     for _, ids in groups:
@@ -182,4 +184,4 @@ def _replicate_noise(
         forces = np.array([np.interp(grid, c.angle_deg, c.force_n) for c in curves])
         squares += float(np.sum((forces - forces.mean(axis=0)) ** 2))
         dof += grid.size * (len(ids) - 1)
-    return float(np.sqrt(squares / dof)) if dof else None
+    return (float(np.sqrt(squares / dof)) if dof else None), dof

@@ -1,0 +1,559 @@
+"""``diagnose``: where the model fails, which physical effect is missing.
+
+1. **Calibrate** the current model (``calibrate``; each calibration of a study is
+   a step of its *model ladder* in the Optuna storage).
+2. **Where it fails.** The residuals at the calibrated point are set against the
+   noise level by F-tests — ``(RSS/dof) / s²`` with the noise's own degrees of
+   freedom (replicates), so a noise level estimated from few replicates does not
+   raise false alarms: overall, per test, per angle band and per value of each
+   condition (Bonferroni over the cells).
+3. **What the residual follows.** For each condition, covariate and the angle:
+   a weighted regression of the tests' mean residual on that column (the angle:
+   of every residual on a cubic in the angle), F-tested, Bonferroni over the
+   columns. With ten-odd tests a GP with one length scale per covariate has too
+   little to learn from; one-at-a-time regressions are what such data support, and
+   they say plainly which column the misfit follows.
+4. **Which effect is missing.** Every candidate effect not in the model (built-ins
+   and registered plug-ins), whose test condition varies in the data, is added and
+   recalibrated *locally* with the full solver (a bounded trust-region least-squares
+   fit from the calibrated point, finite-difference Jacobian: ``(p+1)·G`` solver
+   runs an iteration); its held-out error comes from leaving one test out of the
+   linearised fit at the optimum (a ridge refit on the other tests), and its BIC penalises
+   the extra parameters. Candidates are ranked by ΔBIC (best first).
+5. **Verdict.** An effect is named only when it is decisive (ΔBIC < −10) *and*
+   cuts the held-out error by at least 10 %; when none brings the error near the
+   noise level, the column the residual follows is named instead.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import optuna
+from scipy import stats
+from scipy.optimize import least_squares
+
+from ._calibrate import (
+    CalibrationProblem,
+    _load,
+    _Runs,
+    calibrate,
+    calibration_study_name,
+    model_label,
+)
+from ._compare import BANDS, _bands
+from ._errors import InputDataError
+from .effects import available_effects, get_effect
+
+__all__ = ["DiagnosisResult", "diagnose", "model_ladder"]
+
+SIGNIFICANCE = 0.01  # family-wise level of every test (Bonferroni within a family)
+DECISIVE_DELTA_BIC = -10.0  # "very strong" evidence (Kass & Raftery 1995)
+HELDOUT_GAIN = 0.9  # a named effect cuts the held-out RMSE by ≥ 10 %
+NEAR_NOISE = 1.3  # an RMSE within 1.3× noise is explained
+_LOCAL_EVALS = 40  # residual evaluations of one local refit (each G solver runs)
+LOO_PRIOR_UNIT = 0.05  # prior SD of a parameter in the held-out refits, fraction of its range
+
+
+@dataclass(frozen=True)
+class DiagnosisResult:
+    """Keys of ``surrogate diagnose --json`` (``ranking`` best first)."""
+
+    rmse_n: float
+    noise_n: float
+    systematic: bool
+    p_value: float
+    where: list[dict[str, Any]]
+    follows: list[dict[str, Any]]
+    ranking: list[dict[str, Any]]
+    unexplained: dict[str, Any] | None
+    verdict: str
+    effects: list[str]
+    heldout_rmse_n: float
+    solver_calls: int
+    ladder: list[dict[str, Any]]
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def diagnose(
+    study: Any,
+    *,
+    effects: Sequence[str] | None = None,
+    plugins: Sequence[str] = (),
+    storage: str | None = None,
+    candidates: Sequence[str] | None = None,
+    progress: bool = True,
+) -> DiagnosisResult:
+    """Calibrate the model, test its misfit against the noise, rank missing effects.
+
+    Parameters
+    ----------
+    study : path or StudySpec
+        A study with ``[measurements]``.
+    effects : sequence of str, optional
+        The current model's effects (default: the study's ``[model] effects``).
+    candidates : sequence of str, optional
+        Effects to try (default: every registered effect not in the model).
+    """
+    spec, data, chosen, noise = _load(study, effects, plugins)
+    url = storage or spec.default_storage()
+    say = _Say(progress, f"{spec.name}/diagnose")
+    fitted = calibrate(spec, effects=chosen, storage=url, progress=progress)
+    problem = CalibrationProblem(spec, data, chosen)
+    runs = _Runs(problem, spec.directory / ".solver-cache", jobs=1)
+    theta = np.array([fitted.params[n] for n in problem.space.names])
+    current = _local_fit(problem, runs, theta, refit=False, noise=noise)
+    dof_noise = math.inf if spec.noise_n is not None or not data.noise_dof else data.noise_dof
+    n_points = problem.n_points
+    residual = current.residual
+    rss = float(residual @ residual)
+    p_value = _f_test(rss, n_points - len(theta), noise, dof_noise)
+    systematic = p_value < SIGNIFICANCE
+    where = _where(problem, residual, current.curves, noise, dof_noise)
+    follows = _follows(problem, residual, noise)
+    say(
+        f"model {model_label(chosen)}: RMSE {fitted.rmse_n:.4g} N, noise {noise:.4g} N, "
+        f"{'systematic' if systematic else 'within the noise'} (p = {p_value:.2g})"
+    )
+    ranking = []
+    base_bic = _bic(rss, n_points, len(theta))
+    for name in _candidates(problem, chosen, candidates):
+        extended = CalibrationProblem(spec, data, (*chosen, name))
+        start = _start(extended, fitted.params)
+        extended_runs = _Runs(extended, spec.directory / ".solver-cache", jobs=1)
+        fit = _local_fit(extended, extended_runs, start, refit=True, noise=noise)
+        runs.used |= extended_runs.used
+        fit_rss = float(fit.residual @ fit.residual)
+        entry = {
+            "effect": name,
+            "rmse_n": math.sqrt(fit_rss / n_points),
+            "heldout_rmse_n": fit.heldout_rmse,
+            "delta_bic": _bic(fit_rss, n_points, len(start)) - base_bic,
+            "params": dict(zip(extended.space.names, map(float, fit.theta), strict=True)),
+        }
+        ranking.append(entry)
+        say(
+            f"+ {name}: RMSE {entry['rmse_n']:.4g} N, held-out {fit.heldout_rmse:.4g} N, "
+            f"ΔBIC {entry['delta_bic']:.1f}"
+        )
+    ranking.sort(key=lambda e: e["delta_bic"])
+    unexplained, verdict = _verdict(
+        fitted.rmse_n, current.heldout_rmse, noise, systematic, p_value, ranking, follows
+    )
+    _record_heldout(url, calibration_study_name(spec, chosen), current.heldout_rmse)
+    result = DiagnosisResult(
+        rmse_n=fitted.rmse_n,
+        noise_n=noise,
+        systematic=systematic,
+        p_value=p_value,
+        where=where,
+        follows=follows,
+        ranking=[{k: v for k, v in e.items()} for e in ranking],
+        unexplained=unexplained,
+        verdict=verdict,
+        effects=list(chosen),
+        heldout_rmse_n=current.heldout_rmse,
+        solver_calls=fitted.solver_calls + runs.calls,
+        ladder=model_ladder(url, spec.name),
+    )
+    _attach_ladder(url, calibration_study_name(spec, chosen), result)
+    say(verdict)
+    return result
+
+
+def _attach_ladder(url: str, name: str, result: DiagnosisResult) -> None:
+    """The ladder and the verdict on the calibration study, for optuna-dashboard."""
+    try:
+        import plotly.graph_objects as go
+        from optuna_dashboard import save_note, save_plotly_graph_object
+    except ImportError:
+        return
+    study = optuna.load_study(study_name=name, storage=url)
+    ladder = result.ladder
+    figure = go.Figure()
+    models = [s["model"] for s in ladder]
+    figure.add_trace(go.Scatter(x=models, y=[s["rmse_n"] for s in ladder], name="RMSE"))
+    figure.add_trace(
+        go.Scatter(x=models, y=[s["heldout_rmse_n"] for s in ladder], name="held-out RMSE")
+    )
+    figure.add_trace(
+        go.Scatter(x=models, y=[result.noise_n] * len(ladder), name="noise", mode="lines")
+    )
+    figure.update_layout(
+        title="Model ladder", yaxis_title="error [N]", yaxis_type="log", xaxis_title="model"
+    )
+    save_plotly_graph_object(study, figure, graph_object_id="model-ladder")
+    rows = [
+        f"| {e['effect']} | {e['rmse_n']:.4g} | {e['heldout_rmse_n']:.4g} | {e['delta_bic']:.1f} |"
+        for e in result.ranking
+    ]
+    save_note(
+        study,
+        "\n".join(
+            [
+                f"## Diagnosis: {result.verdict}",
+                "",
+                "| added effect | RMSE [N] | held-out RMSE [N] | ΔBIC |",
+                "|---|---|---|---|",
+                *rows,
+            ]
+        ),
+    )
+
+
+class _Say:
+    def __init__(self, on: bool, label: str) -> None:
+        self.on, self.label = on, label
+
+    def __call__(self, text: str) -> None:
+        if self.on:
+            print(f"[{self.label}] {text}", file=sys.stderr, flush=True)
+
+
+# -- statistics ---------------------------------------------------------------------------------
+def _f_test(rss: float, dof: int, noise: float, dof_noise: float) -> float:
+    """P-value of "the residuals are noise": (RSS/dof)/s² ~ F(dof, dof_noise)."""
+    if dof <= 0:
+        return 1.0
+    ratio = rss / dof / noise**2
+    if math.isinf(dof_noise):
+        return float(stats.chi2.sf(ratio * dof, dof))
+    return float(stats.f.sf(ratio, dof, dof_noise))
+
+
+def _bic(rss: float, n: int, k: int) -> float:
+    return n * math.log(rss / n) + k * math.log(n)
+
+
+def _where(
+    problem: CalibrationProblem,
+    residual: np.ndarray,
+    curves: np.ndarray,
+    noise: float,
+    dof_noise: float,
+) -> list[dict[str, Any]]:
+    """Cells (tests, angle bands, condition values) whose misfit the noise does not explain."""
+    cells: list[tuple[str, str, np.ndarray]] = []
+    for index, test_id in enumerate(problem.test_ids):
+        cells.append(("test", str(test_id), problem.point_test == index))
+    band = _bands(problem, curves)
+    for index, label in enumerate(BANDS):
+        if np.any(band == index):
+            cells.append(("angle band", label, band == index))
+    table = problem.data.tests.set_index("test_id")
+    for column in problem.data.conditions:
+        values = [table.loc[t, column] for t in problem.test_ids]
+        if len(set(values)) < 2:
+            continue
+        for value in sorted(set(values), key=str):
+            tests = [i for i, v in enumerate(values) if v == value]
+            cells.append((column, str(value), np.isin(problem.point_test, tests)))
+    found = []
+    for kind, name, mask in cells:
+        r = residual[mask]
+        p = _f_test(float(r @ r), r.size, noise, dof_noise)
+        if p * len(cells) < SIGNIFICANCE:
+            found.append(
+                {
+                    "kind": kind,
+                    "name": name,
+                    "rmse_n": float(np.sqrt(np.mean(r**2))),
+                    "bias_n": float(np.mean(r)),
+                    "p_value": min(1.0, p * len(cells)),
+                }
+            )
+    return sorted(found, key=lambda c: -c["rmse_n"])
+
+
+def _numeric(values: list[Any], column: str) -> np.ndarray | None:
+    if all(isinstance(v, str) for v in values):
+        levels = sorted(set(values))
+        return np.array([levels.index(v) for v in values], dtype=float)
+    try:
+        x = np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return np.log(x) if column == "rate_deg_s" and np.all(x > 0) else x
+
+
+def _follows(
+    problem: CalibrationProblem, residual: np.ndarray, noise: float
+) -> list[dict[str, Any]]:
+    """Which columns the residual follows, strongest first (Bonferroni-corrected p)."""
+    n_tests = len(problem.test_ids)
+    counts = np.bincount(problem.point_test, minlength=n_tests)
+    bias = np.bincount(problem.point_test, residual, n_tests) / counts
+    table = problem.data.tests.set_index("test_id")
+    columns = [*problem.data.conditions, *problem.data.covariates]
+    found = []
+    for column in columns:
+        x = _numeric([table.loc[t, column] for t in problem.test_ids], column)
+        if x is None or np.ptp(x) == 0 or n_tests < 3:
+            continue
+        # weighted least squares of the tests' mean residual on the column, weights n_t
+        design = np.column_stack([np.ones(n_tests), x])
+        w = np.sqrt(counts)
+        coef, *_ = np.linalg.lstsq(design * w[:, None], bias * w, rcond=None)
+        explained = float(np.sum(counts * (design @ coef - np.average(bias, weights=counts)) ** 2))
+        # the noise of a test's mean is s/√n_t; so Σ n_t·(fit − mean)² / s² ~ χ²(1) under H0
+        p = float(stats.chi2.sf(explained / noise**2, 1))
+        found.append({"covariate": column, "p_value": p, "slope_n": float(coef[1])})
+    angle = problem.point_angle_deg / 90.0
+    design = np.column_stack([angle, angle**2, angle**3, np.ones_like(angle)])
+    coef, *_ = np.linalg.lstsq(design, residual, rcond=None)
+    explained = float(np.sum((design @ coef - residual.mean()) ** 2))
+    found.append(
+        {
+            "covariate": "angle_deg",
+            "p_value": float(stats.chi2.sf(explained / noise**2, 3)),
+            "slope_n": float(coef[0]),
+        }
+    )
+    for entry in found:
+        entry["p_value"] = min(1.0, entry["p_value"] * len(found))
+        entry["significant"] = entry["p_value"] < SIGNIFICANCE
+    return sorted(found, key=lambda e: e["p_value"])
+
+
+# -- local refits with the full solver -----------------------------------------------------------
+@dataclass
+class _Fit:
+    theta: np.ndarray
+    residual: np.ndarray
+    curves: np.ndarray
+    heldout_rmse: float
+
+
+def _local_fit(
+    problem: CalibrationProblem, runs: _Runs, theta: np.ndarray, *, refit: bool, noise: float
+) -> _Fit:
+    """Least squares from ``theta`` with the full solver; LOO-test error of the linearised fit."""
+    space = problem.space
+    G = len(problem.groups)
+    memo: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+    def evaluate(unit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = np.round(unit, 12).tobytes()
+        if key not in memo:
+            point = space.from_unit(np.clip(unit, 0.0, 1.0)[None, :])[0]
+            out = runs.run(np.repeat(point[None, :], G, axis=0), list(range(G)))
+            if any(o is None for o in out):
+                raise _Failed(runs.failures[-1] if runs.failures else "solver failed")
+            curves = np.array([o["curve"] for o in out])  # type: ignore[index]
+            memo[key] = (problem.residuals(curves), curves)
+        return memo[key]
+
+    def jacobian(unit: np.ndarray) -> np.ndarray:
+        """Forward differences of 1e-3 in unit coordinates (inwards at a bound)."""
+        residual = evaluate(unit)[0]
+        jac = np.empty((residual.size, unit.size))
+        for j in range(unit.size):
+            step = 1e-3 if unit[j] + 1e-3 <= 1.0 else -1e-3
+            shifted = unit.copy()
+            shifted[j] += step
+            try:
+                jac[:, j] = (evaluate(shifted)[0] - residual) / step
+            except _Failed:
+                jac[:, j] = 0.0
+        return jac
+
+    unit = np.clip(space.to_unit(theta[None, :])[0], 0.0, 1.0)
+    if refit:
+        try:
+            found = least_squares(
+                lambda u: evaluate(u)[0],
+                unit,
+                jac=jacobian,
+                bounds=(0.0, 1.0),
+                max_nfev=_LOCAL_EVALS,
+            )
+            unit = found.x
+        except _Failed:
+            pass  # keep the last good point: the refit could not run everywhere
+    residual, curves = evaluate(unit)
+    jac = jacobian(unit)
+    return _Fit(
+        space.from_unit(unit[None, :])[0],
+        residual,
+        curves,
+        _heldout(problem, residual, jac, noise),
+    )
+
+
+class _Failed(Exception):
+    pass
+
+
+def _heldout(
+    problem: CalibrationProblem, residual: np.ndarray, jac: np.ndarray, noise: float
+) -> float:
+    """Leave-one-test-out RMSE of the linearised fit at the optimum.
+
+    Each test in turn is left out and the linearised model refitted on the
+    others — with a Gaussian prior of ``LOO_PRIOR_UNIT`` of each parameter's range
+    around the full-data fit (ridge ``λ = noise²/σ²``), so a parameter only the
+    left-out test determines (the weft factor of a lone weft test) stays where
+    the full data put it instead of running off — then the left-out test is
+    predicted.
+    """
+    ridge = (noise / LOO_PRIOR_UNIT) ** 2 * np.eye(jac.shape[1])
+    gram = jac.T @ jac
+    gradient = jac.T @ residual
+    total = 0.0
+    for index in range(len(problem.test_ids)):
+        rows = problem.point_test == index
+        j_t, r_t = jac[rows], residual[rows]
+        step = np.linalg.solve(gram - j_t.T @ j_t + ridge, -(gradient - j_t.T @ r_t))
+        left_out = r_t + j_t @ step
+        total += float(left_out @ left_out)
+    return math.sqrt(total / residual.size)
+
+
+def _candidates(
+    problem: CalibrationProblem, chosen: Sequence[str], names: Sequence[str] | None
+) -> list[str]:
+    """Effects to try: not in the model, and each condition they read varies in the data."""
+    table = problem.data.tests
+    out = []
+    for name in names if names is not None else available_effects():
+        if name in chosen:
+            continue
+        effect = get_effect(name)
+        readable = [c for c in effect.reads if c in table and c != "width_mm"]
+        if readable and all(table[c].nunique() < 2 for c in readable):
+            continue  # nothing in the data can show it
+        if any(c not in table for c in effect.reads if c not in ("width_mm",)):
+            continue
+        out.append(name)
+    return out
+
+
+def _start(problem: CalibrationProblem, params: dict[str, float]) -> np.ndarray:
+    """The calibrated point with the new effect switched off (its nearest bound)."""
+    values = []
+    for spec in problem.space:
+        if spec.name in params:
+            values.append(params[spec.name])
+            continue
+        effect, name = spec.name.split(".", 1)
+        off = next(p.off for p in get_effect(effect).parameters if p.name == name)
+        if math.isnan(off):  # friction: start from the rig's own value
+            off = problem.spec.rig.friction
+        values.append(min(max(off, spec.low), spec.high))
+    return np.array(values, dtype=float)
+
+
+def _verdict(
+    rmse: float,
+    heldout: float,
+    noise: float,
+    systematic: bool,
+    p_value: float,
+    ranking: list[dict[str, Any]],
+    follows: list[dict[str, Any]],
+) -> tuple[dict[str, Any] | None, str]:
+    trail = [f for f in follows if f["significant"]]
+    column = trail[0]["covariate"] if trail else None
+    if not systematic:
+        return None, (
+            f"no systematic misfit: RMSE {rmse:.3g} N is what noise {noise:.3g} N explains "
+            f"(p = {p_value:.2g}); no effect needed"
+        )
+    best = ranking[0] if ranking else None
+    named = (
+        best is not None
+        and best["delta_bic"] < DECISIVE_DELTA_BIC
+        and best["heldout_rmse_n"] < HELDOUT_GAIN * heldout
+    )
+    if named and best is not None:
+        why = f"residual follows {column}; " if column else ""
+        text = (
+            f"missing effect: {best['effect']} — {why}`{best['effect']}` cuts held-out RMSE "
+            f"from {heldout:.3g} N to {best['heldout_rmse_n']:.3g} N "
+            f"(ΔBIC {best['delta_bic']:.0f}), noise {noise:.3g} N"
+        )
+        if best["rmse_n"] <= NEAR_NOISE * noise:
+            return None, text
+        text += "; a misfit remains after it"
+    if column is None:
+        return {"covariate": None}, (
+            f"unexplained: RMSE {rmse:.3g} N against noise {noise:.3g} N, and the residual "
+            "follows no recorded column; no effect in the library explains it"
+        )
+    unexplained = {"covariate": column, "p_value": trail[0]["p_value"]}
+    lead = text + ". " if named else ""
+    return unexplained, (
+        f"{lead}unexplained: residual follows {column}; no effect in the library explains "
+        "it — write a plug-in effect"
+    )
+
+
+# -- the model ladder ---------------------------------------------------------------------------
+def _record_heldout(url: str, name: str, heldout: float) -> None:
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    try:
+        study = optuna.load_study(study_name=name, storage=url)
+    except KeyError:
+        return
+    study.set_user_attr("heldout_rmse_n", heldout)
+
+
+def model_ladder(url: str, name: str) -> list[dict[str, Any]]:
+    """Every calibration of the study, as steps of the model ladder (fewest effects first)."""
+    prefix = f"{name}/calibrate/"
+    steps = []
+    for summary in optuna.get_all_study_summaries(storage=url, include_best_trial=False):
+        if not summary.study_name.startswith(prefix):
+            continue
+        result = summary.user_attrs.get("result")
+        if not result:
+            continue
+        steps.append(
+            {
+                "model": summary.study_name[len(prefix) :],
+                "effects": result["effects"],
+                "rmse_n": result["rmse_n"],
+                "heldout_rmse_n": summary.user_attrs.get("heldout_rmse_n"),
+                "noise_n": result["noise_n"],
+                "solver_calls": result["solver_calls"],
+                "params": result["params"],
+            }
+        )
+    return sorted(steps, key=lambda s: (len(s["effects"]), -s["rmse_n"]))
+
+
+def write_ladder_plot(ladder: list[dict[str, Any]], path: Path) -> Path | None:
+    """The falling error of the ladder as a PNG (None without matplotlib)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return None
+    if not ladder:
+        raise InputDataError("no calibration in the storage yet; run surrogate calibrate first")
+    figure, axis = plt.subplots(figsize=(7, 4))
+    x = np.arange(len(ladder))
+    axis.plot(x, [s["rmse_n"] for s in ladder], "o-", label="RMSE")
+    held = [s["heldout_rmse_n"] for s in ladder]
+    if any(h is not None for h in held):
+        axis.plot(x, [np.nan if h is None else h for h in held], "s--", label="held-out RMSE")
+    axis.axhline(ladder[0]["noise_n"], color="grey", ls=":", label="noise")
+    axis.set_yscale("log")
+    axis.set_xticks(x, [s["model"] for s in ladder], rotation=20)
+    axis.set(ylabel="error [N]", title="Model ladder: the error as effects are added")
+    axis.legend()
+    figure.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+    return path

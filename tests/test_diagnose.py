@@ -1,0 +1,95 @@
+"""The diagnosis on data with a hidden effect and decoy covariates, and without one.
+
+Seeded synthetic data (surrogate._synthetic); the truth is known to the test only.
+The per-effect sweep over every built-in effect is benchmarks/diagnosis.py's job.
+"""
+
+import json
+import textwrap
+
+import pytest
+
+import surrogate
+from surrogate._cli import main
+from surrogate._synthetic import synthetic_measurements
+
+TRUTH = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
+NOISE = 0.05
+# tension and direction vary; temperature is a decoy column that does not matter
+TESTS = [
+    {"test_id": "a1", "tension_n": 0.0, "direction": "warp", "temperature_c": 21.0},
+    {"test_id": "a2", "tension_n": 0.0, "direction": "warp", "temperature_c": 24.5},
+    {"test_id": "b", "tension_n": 20.0, "direction": "weft", "temperature_c": 22.0},
+    {"test_id": "c", "tension_n": 40.0, "direction": "warp", "temperature_c": 23.0},
+]
+CANDIDATES = ["tension", "anisotropy", "hardening", "membrane_bending"]
+
+
+def _study(tmp_path, hidden):
+    table = synthetic_measurements(TESTS, coating=TRUTH, effects=hidden, noise_n=NOISE, seed=3)
+    table.to_csv(tmp_path / "tests.csv", index=False)
+    (tmp_path / "study.toml").write_text(
+        textwrap.dedent(
+            """
+            [study]
+            name = "diag"
+            [parameters]
+            ecoat_gpa = { low = 0.5,  high = 4.0, log = true }
+            scoat_gpa = { low = 0.05, high = 0.4, log = true }
+            tcoat_mm  = { low = 0.01, high = 0.1, log = true }
+            [measurements]
+            file = "tests.csv"
+            [budget]
+            surrogate_trials = 100
+            """
+        )
+    )
+    return tmp_path / "study.toml"
+
+
+def test_hidden_tension_is_named_and_adding_it_brings_the_error_to_the_noise(tmp_path):
+    path = _study(tmp_path, {"tension": {"k_e": 0.006, "k_s": 0.006}})
+    result = surrogate.diagnose(path, candidates=CANDIDATES, progress=False)
+    assert result.systematic and result.p_value < 1e-6
+    assert result.ranking[0]["effect"] == "tension"
+    assert result.ranking[0]["delta_bic"] < -10
+    assert result.unexplained is None
+    assert result.verdict.startswith("missing effect: tension")
+    follows = [f["covariate"] for f in result.follows if f["significant"]]
+    assert follows[0] == "tension_n" and "temperature_c" not in follows[:1]
+    # add it, watch the error fall: the ladder keeps both calibrations
+    surrogate.calibrate(path, effects=["tension"], progress=False)
+    again = surrogate.diagnose(path, effects=["tension"], candidates=CANDIDATES, progress=False)
+    assert again.rmse_n <= 1.3 * NOISE
+    assert not again.systematic
+    models = {step["model"]: step for step in again.ladder}
+    assert models["tension"]["rmse_n"] < 0.2 * models["base"]["rmse_n"]
+
+
+def test_no_false_alarm_on_data_without_a_hidden_effect(tmp_path, capsys):
+    path = _study(tmp_path, None)
+    assert main(["diagnose", str(path), "--json", "--effect", "tension"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out) >= {
+        "rmse_n",
+        "noise_n",
+        "systematic",
+        "where",
+        "ranking",
+        "unexplained",
+        "verdict",
+    }
+    assert out["systematic"] is False
+    assert out["unexplained"] is None
+    assert out["verdict"].startswith("no systematic misfit")
+    deltas = [e["delta_bic"] for e in out["ranking"]]
+    assert deltas == sorted(deltas)
+
+
+@pytest.mark.parametrize("option", [["--effect", "nonsense"], ["--plugin", "no_module_q"]])
+def test_bad_diagnose_options_are_one_line_errors(tmp_path, capsys, option):
+    path = _study(tmp_path, None)
+    with pytest.raises(SystemExit) as exit_info:
+        main(["diagnose", str(path), *option])
+    assert exit_info.value.code == 2
+    assert "\n" not in capsys.readouterr().err.strip()
