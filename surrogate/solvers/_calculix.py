@@ -307,7 +307,7 @@ class _Deck:
         lines = [
             "*STEP, NLGEOM, INC=5000",
             # more iterations (IC 16 → 30) and cutbacks (IA 5 → 15) per increment than
-            # ccx's defaults: a yielding coat under contact needs them (fine mesh)
+            # ccx's defaults, for the yielding, frictional contact increments
             "*CONTROLS, PARAMETERS=TIME INCREMENTATION",
             "4, 8, 9, 30, 10, 4, 0, 15",
             "*STATIC",

@@ -128,3 +128,25 @@ def test_ccx_reason_is_its_first_error_line():
     stdout = "increment 12 attempt 5\n *ERROR: too many cutbacks\n best solution and residuals\n"
     assert ccx_failure(stdout, 201) == "*ERROR: too many cutbacks"
     assert ccx_failure("Job finished\n", 1) == "ccx exited with code 1 (Job finished)"
+
+
+@pytest.mark.parametrize("exit_code", ["201", "0"])
+def test_ccx_stopping_is_a_failed_run_with_its_reason(tmp_path, monkeypatch, exit_code):
+    """The run path with a stand-in for ccx (fixtures/fake_ccx.py, NOT CalculiX) that
+    stops after 10 increments with ccx's own message."""
+    import sys
+
+    monkeypatch.setenv("FAKE_CCX_EXIT", exit_code)
+    from surrogate._batch import solve_inputs, solver_inputs
+
+    settings = {
+        "command": [sys.executable, str(FIXTURES / "fake_ccx.py")],
+        "workdir_root": str(tmp_path / "work"),
+    }
+    point = {"ecoat_gpa": 1.0, "scoat_gpa": 0.2, "tcoat_mm": 0.012}
+    result = solve_inputs(solver_inputs(point, Rig(), solver="calculix", solver_settings=settings))
+    assert result["status"] == "failed"
+    assert result["reason"] == (
+        "ccx did not reach 90°: *ERROR: too many cutbacks (last converged 26.25°)"  # 10th block
+    )
+    assert list((tmp_path / "work").iterdir()) == []
