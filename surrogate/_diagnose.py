@@ -9,10 +9,11 @@
    condition (Bonferroni over the cells).
 3. **What the residual follows.** For each condition, covariate and the angle:
    a weighted regression of the tests' mean residual on that column (the angle:
-   of every residual on a cubic in the angle), F-tested, Bonferroni over the
-   columns. With ten-odd tests a GP with one length scale per covariate has too
-   little to learn from; one-at-a-time regressions are what such data support, and
-   they say plainly which column the misfit follows.
+   of every residual on a cubic in the angle), F-tested against what it leaves
+   unexplained (at least the noise), Bonferroni over the columns. With ten-odd
+   tests a GP with one length scale per covariate has too little to learn from;
+   one-at-a-time regressions are what such data support, and they say plainly
+   which column the misfit follows.
 4. **Which effect is missing.** Every candidate effect not in the model (built-ins
    and registered plug-ins), whose test condition varies in the data, is added and
    recalibrated *locally* with the full solver (a bounded trust-region least-squares
@@ -287,40 +288,49 @@ def _numeric(values: list[Any], column: str) -> np.ndarray | None:
 def _follows(
     problem: CalibrationProblem, residual: np.ndarray, noise: float
 ) -> list[dict[str, Any]]:
-    """Which columns the residual follows, strongest first (Bonferroni-corrected p)."""
+    """Which columns the residual follows, strongest first (Bonferroni-corrected p).
+
+    Each column in turn: a weighted regression of the tests' mean residual on it
+    (weights: the tests' point counts), F-tested against what it leaves unexplained
+    — or against the noise, whichever is larger — so a decoy that merely
+    correlates a little with the real cause is not reported while the misfit is
+    far above the noise. The angle: every residual on a cubic in the angle.
+    """
     n_tests = len(problem.test_ids)
-    counts = np.bincount(problem.point_test, minlength=n_tests)
+    counts = np.bincount(problem.point_test, minlength=n_tests).astype(float)
     bias = np.bincount(problem.point_test, residual, n_tests) / counts
     table = problem.data.tests.set_index("test_id")
-    columns = [*problem.data.conditions, *problem.data.covariates]
     found = []
-    for column in columns:
+    for column in (*problem.data.conditions, *problem.data.covariates):
         x = _numeric([table.loc[t, column] for t in problem.test_ids], column)
         if x is None or np.ptp(x) == 0 or n_tests < 3:
             continue
-        # weighted least squares of the tests' mean residual on the column, weights n_t
         design = np.column_stack([np.ones(n_tests), x])
-        w = np.sqrt(counts)
-        coef, *_ = np.linalg.lstsq(design * w[:, None], bias * w, rcond=None)
-        explained = float(np.sum(counts * (design @ coef - np.average(bias, weights=counts)) ** 2))
-        # the noise of a test's mean is s/√n_t; so Σ n_t·(fit − mean)² / s² ~ χ²(1) under H0
-        p = float(stats.chi2.sf(explained / noise**2, 1))
-        found.append({"covariate": column, "p_value": p, "slope_n": float(coef[1])})
+        found.append(_regression(column, design, bias, counts, noise))
     angle = problem.point_angle_deg / 90.0
-    design = np.column_stack([angle, angle**2, angle**3, np.ones_like(angle)])
-    coef, *_ = np.linalg.lstsq(design, residual, rcond=None)
-    explained = float(np.sum((design @ coef - residual.mean()) ** 2))
-    found.append(
-        {
-            "covariate": "angle_deg",
-            "p_value": float(stats.chi2.sf(explained / noise**2, 3)),
-            "slope_n": float(coef[0]),
-        }
-    )
+    design = np.column_stack([np.ones_like(angle), angle, angle**2, angle**3])
+    found.append(_regression("angle_deg", design, residual, np.ones_like(residual), noise))
     for entry in found:
         entry["p_value"] = min(1.0, entry["p_value"] * len(found))
         entry["significant"] = entry["p_value"] < SIGNIFICANCE
-    return sorted(found, key=lambda e: e["p_value"])
+    return sorted(found, key=lambda e: (e["p_value"], -e["f_stat"]))
+
+
+def _regression(
+    name: str, design: np.ndarray, y: np.ndarray, weights: np.ndarray, noise: float
+) -> dict[str, Any]:
+    """F-test of a weighted least-squares fit against a constant; noise as the floor."""
+    w = np.sqrt(weights)
+    coef, *_ = np.linalg.lstsq(design * w[:, None], y * w, rcond=None)
+    fitted = design @ coef
+    mean = np.average(y, weights=weights)
+    k = design.shape[1] - 1
+    explained = float(np.sum(weights * (fitted - mean) ** 2)) / k
+    dof = y.size - design.shape[1]
+    scatter = float(np.sum(weights * (y - fitted) ** 2)) / max(dof, 1)
+    f_stat = explained / max(scatter, noise**2)
+    p = float(stats.f.sf(f_stat, k, dof)) if dof > 0 else 1.0
+    return {"covariate": name, "p_value": p, "f_stat": f_stat, "slope_n": float(coef[1])}
 
 
 # -- local refits with the full solver -----------------------------------------------------------
