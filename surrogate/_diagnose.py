@@ -111,17 +111,19 @@ def diagnose(
     problem = CalibrationProblem(spec, data, chosen)
     runs = _Runs(problem, spec.directory / ".solver-cache", jobs=1)
     theta = np.array([fitted.params[n] for n in problem.space.names])
-    current = _local_fit(problem, runs, theta, refit=False, noise=noise)
+    # the same local refit as every candidate gets, so ΔBIC compares like with like
+    current = _local_fit(problem, runs, theta, refit=True, noise=noise)
     dof_noise = math.inf if spec.noise_n is not None or not data.noise_dof else data.noise_dof
     n_points = problem.n_points
     residual = current.residual
     rss = float(residual @ residual)
+    rmse = math.sqrt(rss / problem.n_points)
     p_value = _f_test(rss, n_points - len(theta), noise, dof_noise)
     systematic = p_value < SIGNIFICANCE
     where = _where(problem, residual, current.curves, noise, dof_noise)
     follows = _follows(problem, residual, noise)
     say(
-        f"model {model_label(chosen)}: RMSE {fitted.rmse_n:.4g} N, noise {noise:.4g} N, "
+        f"model {model_label(chosen)}: RMSE {rmse:.4g} N, noise {noise:.4g} N, "
         f"{'systematic' if systematic else 'within the noise'} (p = {p_value:.2g})"
     )
     ranking = []
@@ -147,11 +149,11 @@ def diagnose(
         )
     ranking.sort(key=lambda e: e["delta_bic"])
     unexplained, verdict = _verdict(
-        fitted.rmse_n, current.heldout_rmse, noise, systematic, p_value, ranking, follows
+        rmse, current.heldout_rmse, noise, systematic, p_value, ranking, follows
     )
     _record_heldout(url, calibration_study_name(spec, chosen), current.heldout_rmse)
     result = DiagnosisResult(
-        rmse_n=fitted.rmse_n,
+        rmse_n=rmse,
         noise_n=noise,
         systematic=systematic,
         p_value=p_value,
