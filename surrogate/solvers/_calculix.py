@@ -378,6 +378,12 @@ def calculix_deck(state: ModelState, *, mesh: str | CalculixMesh = "coarse") -> 
             "the calculix solver has no bare-webbing bending stiffness (membrane_bending); "
             "use the builtin solver for that effect"
         )
+    if state.line_load_n_mm or state.clamp_stiffness_nmm is not None:
+        effect = "gravity" if state.line_load_n_mm else "clamp_slip"
+        raise InputDataError(
+            f"the calculix deck models neither self-weight nor a compliant clamp ({effect}); "
+            "use the builtin solver for that effect"
+        )
     return _Deck(state, mesh).text()
 
 

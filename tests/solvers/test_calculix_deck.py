@@ -92,6 +92,10 @@ def test_bad_mesh_and_unsupported_effect_are_input_errors():
         calculix_deck(STATE, mesh="medium")
     with pytest.raises(InputDataError, match="membrane_bending"):
         calculix_deck(STATE.replace(extra_stiffness_nmm=1.0), mesh="coarse")
+    with pytest.raises(InputDataError, match="gravity"):
+        calculix_deck(STATE.replace(line_load_n_mm=1e-3), mesh="coarse")
+    with pytest.raises(InputDataError, match="clamp_slip"):
+        calculix_deck(STATE.replace(clamp_stiffness_nmm=100.0), mesh="coarse")
 
 
 def test_dat_parser_on_real_ccx_output():
