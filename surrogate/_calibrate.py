@@ -41,10 +41,10 @@ from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
 
 from ._batch import solve_inputs, solver_inputs
 from ._cache import ResultCache, input_hash
-from ._conditions import CONDITIONS, check_conditions, rig_for
+from ._conditions import CONDITIONS
 from ._errors import InputDataError
 from ._measurements import MeasurementSet, load_measurements
-from ._simulate import coating_state
+from ._simulate import model_state_of
 from ._space import ParameterSpace, ParameterSpec
 from ._study import StudySpec, load_study
 from .effects import ModelState, get_effect, load_plugin
@@ -113,7 +113,6 @@ class CalibrationProblem:
                     ParameterSpec(f"{name}.{p.name}", p.low, p.high, log=p.log, unit=p.unit)
                 )
         self.space = ParameterSpace.of(specs)
-        self.reads = tuple(sorted(reads))
         self.conditions = tuple(
             c for c in (*CONDITIONS, *data.covariates) if c in reads and c in data.tests
         )
@@ -198,17 +197,14 @@ class CalibrationProblem:
     def state(self, theta: np.ndarray, group: int) -> ModelState:
         """The model state the solver sees for parameter vector ``theta`` at a group."""
         coating, effects = self.split(dict(zip(self.space.names, theta, strict=True)))
-        conditions = check_conditions(self.groups[group], read_by_effects=self.reads)
-        state = coating_state(
+        return model_state_of(
             coating["ecoat_gpa"],
             coating["scoat_gpa"],
             coating["tcoat_mm"],
-            rig_for(self.spec.rig, conditions),
+            self.spec.rig,
+            effects,
+            self.groups[group],
         )
-        for name, values in effects.items():
-            effect = get_effect(name)
-            state = effect.apply(state, effect.resolve(values), conditions)
-        return state
 
     def inputs(self, theta: Mapping[str, float], group: int) -> dict[str, Any]:
         coating, effects = self.split(theta)

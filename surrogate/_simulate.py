@@ -75,6 +75,26 @@ def coating_state(ecoat_gpa: float, scoat_gpa: float, tcoat_mm: float, rig: Rig)
     return ModelState(gpa_to_mpa(ecoat), gpa_to_mpa(scoat), tcoat, rig)
 
 
+def model_state_of(
+    ecoat_gpa: float,
+    scoat_gpa: float,
+    tcoat_mm: float,
+    rig: Rig,
+    effects: Mapping[str, Mapping[str, float]] | None,
+    conditions: Mapping[str, Any] | None,
+) -> ModelState:
+    """What a solver sees for one test: the coating validated, the rig of the test's
+    conditions, every effect applied in turn (the one path for every solver)."""
+    enabled = {name: get_effect(name) for name in (effects or {})}
+    reads = [column for effect in enabled.values() for column in effect.reads]
+    checked = check_conditions(conditions, read_by_effects=reads)
+    state = coating_state(ecoat_gpa, scoat_gpa, tcoat_mm, rig_for(rig, checked))
+    for name, values in (effects or {}).items():
+        effect = enabled[name]
+        state = effect.apply(state, effect.resolve(values), checked)
+    return state
+
+
 def simulate(
     ecoat_gpa: float,
     scoat_gpa: float,
@@ -124,14 +144,7 @@ def simulate(
         return _external(
             solver, (ecoat_gpa, scoat_gpa, tcoat_mm), rig, effects, conditions, solver_settings
         )
-    enabled = {name: get_effect(name) for name in (effects or {})}
-    reads = [column for effect in enabled.values() for column in effect.reads]
-    checked = check_conditions(conditions, read_by_effects=reads)
-    rig = rig_for(rig, checked)
-    state = coating_state(ecoat_gpa, scoat_gpa, tcoat_mm, rig)
-    for name, values in (effects or {}).items():
-        effect = enabled[name]
-        state = effect.apply(state, effect.resolve(values), checked)
+    state = model_state_of(ecoat_gpa, scoat_gpa, tcoat_mm, rig, effects, conditions)
     rig = state.rig
     ratio = state.hardening_ratio
     section = CoatingSection(

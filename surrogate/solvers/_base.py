@@ -28,8 +28,8 @@ import numpy as np
 
 from .._errors import InputDataError, SolverError
 from .._rig import Rig
-from .._simulate import coating_state
-from ..effects import ModelState, get_effect
+from .._simulate import model_state_of
+from ..effects import ModelState
 from ..physics import curve_features
 
 __all__ = [
@@ -103,18 +103,15 @@ def get_solver(kind: str) -> Solver:
 def model_state(inputs: Mapping[str, Any]) -> ModelState:
     """The model state of one run: coating in MPa/mm, the rig of its conditions,
     every effect applied (the same path as :func:`surrogate.simulate`)."""
-    from .._conditions import check_conditions, rig_for
-
     params = inputs["params"]
-    enabled = {name: get_effect(name) for name in inputs.get("effects") or {}}
-    reads = [column for effect in enabled.values() for column in effect.reads]
-    conditions = check_conditions(inputs.get("conditions") or None, read_by_effects=reads)
-    rig = rig_for(Rig(**inputs["rig"]), conditions)
-    state = coating_state(params["ecoat_gpa"], params["scoat_gpa"], params["tcoat_mm"], rig)
-    for name, values in (inputs.get("effects") or {}).items():
-        effect = enabled[name]
-        state = effect.apply(state, effect.resolve(values), conditions)
-    return state
+    return model_state_of(
+        params["ecoat_gpa"],
+        params["scoat_gpa"],
+        params["tcoat_mm"],
+        Rig(**inputs["rig"]),
+        inputs.get("effects") or None,
+        inputs.get("conditions") or None,
+    )
 
 
 def failed_result(reason: str) -> dict[str, Any]:
