@@ -134,7 +134,6 @@ class CalibrationProblem:
             self.test_group.append(group_of[key])
         self.angle_deg = np.arange(0.0, np.floor(spec.rig.max_angle_deg) + 1.0)
         self._points(data, test_ids)
-        self.condition_features = self._condition_features()
 
     def _points(self, data: MeasurementSet, test_ids: list[Any]) -> None:
         angles, forces, group, test = [], [], [], []
@@ -157,27 +156,6 @@ class CalibrationProblem:
         self._w = angle - self._lo
         self.point_angle_deg = angle
         self._count = np.bincount(self.point_test, minlength=len(test_ids))
-
-    def _condition_features(self) -> np.ndarray:
-        """(G, c) condition inputs of the surrogate, scaled to [0, 1]; constant ones dropped."""
-        columns = []
-        for name in self.conditions:
-            values = [g[name] for g in self.groups]
-            if name == "direction":
-                column = np.array([v == "weft" for v in values], dtype=float)
-            elif name == "rate_deg_s":
-                column = np.log(np.asarray(values, dtype=float))
-            elif all(isinstance(v, str) for v in values):  # a plug-in's text column
-                levels = sorted(set(values))
-                column = np.array([levels.index(v) for v in values], dtype=float)
-            else:
-                column = np.asarray(values, dtype=float)
-            span = column.max() - column.min()
-            if span > 0:
-                columns.append((column - column.min()) / span)
-        if not columns:
-            return np.zeros((len(self.groups), 0))
-        return np.column_stack(columns)
 
     @property
     def n_points(self) -> int:

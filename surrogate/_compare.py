@@ -223,7 +223,8 @@ def _bands(problem: CalibrationProblem, curves: np.ndarray) -> np.ndarray:
     return band
 
 
-def _numeric(values: list[Any]) -> np.ndarray | None:
+def column_values(values: list[Any]) -> np.ndarray | None:
+    """A table column as numbers: text levels in sorted order, else floats (None if mixed)."""
     if all(isinstance(v, str) for v in values):
         levels = sorted(set(values))
         return np.array([levels.index(v) for v in values], dtype=float)
@@ -239,7 +240,7 @@ def _covariate_correlations(
     bias = np.array([t["bias_n"] for t in tests])
     out = {}
     for column in (*problem.data.conditions, *problem.data.covariates):
-        x = _numeric([t[column] for t in tests])
+        x = column_values([t[column] for t in tests])
         if x is None or np.ptp(x) == 0 or np.ptp(bias) == 0:
             continue
         out[column] = float(np.corrcoef(x, bias)[0, 1])

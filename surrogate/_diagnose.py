@@ -48,7 +48,7 @@ from ._calibrate import (
     calibration_study_name,
     model_label,
 )
-from ._compare import BANDS, _bands
+from ._compare import BANDS, _bands, column_values
 from ._errors import InputDataError
 from .effects import available_effects, get_effect
 
@@ -277,14 +277,11 @@ def _where(
 
 
 def _numeric(values: list[Any], column: str) -> np.ndarray | None:
-    if all(isinstance(v, str) for v in values):
-        levels = sorted(set(values))
-        return np.array([levels.index(v) for v in values], dtype=float)
-    try:
-        x = np.asarray(values, dtype=float)
-    except (TypeError, ValueError):
-        return None
-    return np.log(x) if column == "rate_deg_s" and np.all(x > 0) else x
+    """:func:`column_values`, with the rate on a log scale (the rate effect's own axis)."""
+    x = column_values(values)
+    if x is None or column != "rate_deg_s" or np.any(x <= 0):
+        return x
+    return np.log(x)
 
 
 def _follows(
