@@ -29,8 +29,11 @@
 from __future__ import annotations
 
 import math
+import multiprocessing
+import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -73,6 +76,7 @@ class DiagnosisResult:
     where: list[dict[str, Any]]
     follows: list[dict[str, Any]]
     ranking: list[dict[str, Any]]
+    tied_with: list[str]
     unexplained: dict[str, Any] | None
     verdict: str
     effects: list[str]
@@ -91,6 +95,7 @@ def diagnose(
     plugins: Sequence[str] = (),
     storage: str | None = None,
     candidates: Sequence[str] | None = None,
+    jobs: int | None = None,
     progress: bool = True,
 ) -> DiagnosisResult:
     """Calibrate the model, test its misfit against the noise, rank missing effects.
@@ -103,16 +108,27 @@ def diagnose(
         The current model's effects (default: the study's ``[model] effects``).
     candidates : sequence of str, optional
         Effects to try (default: every registered effect not in the model).
+    jobs : int, optional
+        Processes for the local refits (default: the machine's CPUs).
     """
     spec, data, chosen, noise = _load(study, effects, plugins)
     url = storage or spec.default_storage()
     say = _Say(progress, f"{spec.name}/diagnose")
     fitted = calibrate(spec, effects=chosen, storage=url, progress=progress)
     problem = CalibrationProblem(spec, data, chosen)
-    runs = _Runs(problem, spec.directory / ".solver-cache", jobs=1)
-    theta = np.array([fitted.params[n] for n in problem.space.names])
-    # the same local refit as every candidate gets, so ΔBIC compares like with like
-    current = _local_fit(problem, runs, theta, refit=True, noise=noise)
+    names = _candidates(problem, chosen, candidates)
+    # the current model gets the same local refit as every candidate, so ΔBIC compares
+    # like with like; the refits are independent, one process each
+    tasks = [(spec, data, chosen, None, fitted.params, noise)]
+    tasks += [(spec, data, (*chosen, name), name, fitted.params, noise) for name in names]
+    say(f"refitting the model and {len(names)} candidate effects locally with the full solver")
+    refits: dict[str | None, _Refit] = {}
+    for refit in _map(_refit, tasks, _jobs(jobs, len(tasks))):
+        refits[refit.effect] = refit
+        if refit.effect is not None:
+            say(f"+ {refit.effect}: RMSE {refit.rmse:.4g} N, held-out {refit.heldout_rmse:.4g} N")
+    current = refits[None]
+    theta = current.theta
     dof_noise = math.inf if spec.noise_n is not None or not data.noise_dof else data.noise_dof
     n_points = problem.n_points
     residual = current.residual
@@ -128,28 +144,29 @@ def diagnose(
     )
     ranking = []
     base_bic = _bic(rss, n_points, len(theta))
-    for name in _candidates(problem, chosen, candidates):
-        extended = CalibrationProblem(spec, data, (*chosen, name))
-        start = _start(extended, fitted.params)
-        extended_runs = _Runs(extended, spec.directory / ".solver-cache", jobs=1)
-        fit = _local_fit(extended, extended_runs, start, refit=True, noise=noise)
-        runs.used |= extended_runs.used
+    used = set(current.used)
+    for name in names:
+        fit = refits[name]
+        used |= fit.used
         fit_rss = float(fit.residual @ fit.residual)
-        entry = {
-            "effect": name,
-            "rmse_n": math.sqrt(fit_rss / n_points),
-            "heldout_rmse_n": fit.heldout_rmse,
-            "delta_bic": _bic(fit_rss, n_points, len(start)) - base_bic,
-            "params": dict(zip(extended.space.names, map(float, fit.theta), strict=True)),
-        }
-        ranking.append(entry)
-        say(
-            f"+ {name}: RMSE {entry['rmse_n']:.4g} N, held-out {fit.heldout_rmse:.4g} N, "
-            f"ΔBIC {entry['delta_bic']:.1f}"
+        ranking.append(
+            {
+                "effect": name,
+                "rmse_n": math.sqrt(fit_rss / n_points),
+                "heldout_rmse_n": fit.heldout_rmse,
+                "delta_bic": _bic(fit_rss, n_points, len(fit.theta)) - base_bic,
+                "params": fit.params,
+            }
         )
     ranking.sort(key=lambda e: e["delta_bic"])
+    # candidates not decisively worse than the best: the data cannot tell them apart
+    tied = [
+        e["effect"]
+        for e in ranking[1:]
+        if e["delta_bic"] - ranking[0]["delta_bic"] < -DECISIVE_DELTA_BIC
+    ]
     unexplained, verdict = _verdict(
-        rmse, current.heldout_rmse, noise, systematic, p_value, ranking, follows
+        rmse, current.heldout_rmse, noise, systematic, p_value, ranking, follows, tied
     )
     _record_heldout(url, calibration_study_name(spec, chosen), current.heldout_rmse)
     result = DiagnosisResult(
@@ -160,11 +177,12 @@ def diagnose(
         where=where,
         follows=follows,
         ranking=[{k: v for k, v in e.items()} for e in ranking],
+        tied_with=tied if systematic else [],
         unexplained=unexplained,
         verdict=verdict,
         effects=list(chosen),
         heldout_rmse_n=current.heldout_rmse,
-        solver_calls=fitted.solver_calls + runs.calls,
+        solver_calls=fitted.solver_calls + len(used),
         ladder=model_ladder(url, spec.name),
     )
     _attach_ladder(url, calibration_study_name(spec, chosen), result)
@@ -334,6 +352,66 @@ def _regression(
 
 # -- local refits with the full solver -----------------------------------------------------------
 @dataclass
+class _Refit:
+    """One model (the current one, ``effect=None``, or it plus a candidate) refitted locally."""
+
+    effect: str | None
+    theta: np.ndarray
+    params: dict[str, float]
+    residual: np.ndarray
+    curves: np.ndarray
+    heldout_rmse: float
+    used: set[str]
+
+    @property
+    def rmse(self) -> float:
+        return float(np.sqrt(np.mean(self.residual**2)))
+
+
+def _refit(task: tuple[Any, ...]) -> _Refit:
+    """Refit ``effects`` locally from the calibrated point (a candidate starts switched off)."""
+    spec, data, effects, effect, params, noise = task
+    problem = CalibrationProblem(spec, data, effects)
+    runs = _Runs(problem, spec.directory / ".solver-cache", jobs=1)
+    fit = _local_fit(problem, runs, _start(problem, params), refit=True, noise=noise)
+    return _Refit(
+        effect,
+        fit.theta,
+        dict(zip(problem.space.names, map(float, fit.theta), strict=True)),
+        fit.residual,
+        fit.curves,
+        fit.heldout_rmse,
+        runs.used,
+    )
+
+
+def _jobs(jobs: int | None, tasks: int) -> int:
+    if jobs is not None and jobs < 1:
+        raise InputDataError(f"jobs must be ≥ 1, got {jobs}")
+    return max(1, min(jobs or os.cpu_count() or 1, tasks))
+
+
+def _map(function: Any, tasks: list[Any], jobs: int) -> Iterator[Any]:
+    """``function`` over ``tasks`` in ``jobs`` forked processes, yielding as each finishes.
+
+    Forked, so effects registered in this process (plug-ins, or in code) exist in
+    the workers too.
+    """
+    if jobs == 1:
+        yield from map(function, tasks)
+        return
+    context = multiprocessing.get_context("fork")
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        futures = [pool.submit(function, task) for task in tasks]
+        try:
+            for future in as_completed(futures):
+                yield future.result()
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+
+@dataclass
 class _Fit:
     theta: np.ndarray
     residual: np.ndarray
@@ -383,6 +461,8 @@ def _local_fit(
                 jac=jacobian,
                 bounds=(0.0, 1.0),
                 max_nfev=_LOCAL_EVALS,
+                ftol=1e-4,
+                xtol=1e-5,
             )
             unit = found.x
         except _Failed:
@@ -393,7 +473,7 @@ def _local_fit(
         space.from_unit(unit[None, :])[0],
         residual,
         curves,
-        _heldout(problem, residual, jac, noise),
+        _heldout(problem, residual, jac, unit, noise),
     )
 
 
@@ -402,7 +482,11 @@ class _Failed(Exception):
 
 
 def _heldout(
-    problem: CalibrationProblem, residual: np.ndarray, jac: np.ndarray, noise: float
+    problem: CalibrationProblem,
+    residual: np.ndarray,
+    jac: np.ndarray,
+    unit: np.ndarray,
+    noise: float,
 ) -> float:
     """Leave-one-test-out RMSE of the linearised fit at the optimum.
 
@@ -411,11 +495,15 @@ def _heldout(
     around the full-data fit (ridge ``λ = noise²/σ²``), so a parameter only the
     left-out test determines (the weft factor of a lone weft test) stays where
     the full data put it instead of running off — then the left-out test is
-    predicted.
+    predicted. A parameter held at a bound of its range (the fit pushes against
+    it) stays there: the linearisation knows no bounds.
     """
+    gradient = jac.T @ residual
+    active = ((unit <= 1e-9) & (gradient > 0)) | ((unit >= 1.0 - 1e-9) & (gradient < 0))
+    jac = jac[:, ~active]
+    gradient = gradient[~active]
     ridge = (noise / LOO_PRIOR_UNIT) ** 2 * np.eye(jac.shape[1])
     gram = jac.T @ jac
-    gradient = jac.T @ residual
     total = 0.0
     for index in range(len(problem.test_ids)):
         rows = problem.point_test == index
@@ -468,6 +556,7 @@ def _verdict(
     p_value: float,
     ranking: list[dict[str, Any]],
     follows: list[dict[str, Any]],
+    tied: Sequence[str] = (),
 ) -> tuple[dict[str, Any] | None, str]:
     trail = [f for f in follows if f["significant"]]
     column = trail[0]["covariate"] if trail else None
@@ -489,6 +578,12 @@ def _verdict(
             f"from {heldout:.3g} N to {best['heldout_rmse_n']:.3g} N "
             f"(ΔBIC {best['delta_bic']:.0f}), noise {noise:.3g} N"
         )
+        if tied:
+            also = ", ".join(f"`{name}`" for name in tied)
+            text += (
+                f"; {also} {'fits' if len(tied) == 1 else 'fit'} as well (ΔBIC within "
+                f"{-DECISIVE_DELTA_BIC:.0f}): these data cannot tell them apart"
+            )
         if best["rmse_n"] <= NEAR_NOISE * noise:
             return None, text
         text += "; a misfit remains after it"

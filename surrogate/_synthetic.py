@@ -17,7 +17,7 @@ from ._conditions import CONDITIONS
 from ._rig import Rig
 from ._simulate import simulate
 
-__all__ = ["synthetic_measurements"]
+__all__ = ["HIDDEN_EFFECT_TESTS", "hidden_effect_tests", "synthetic_measurements"]
 
 
 def synthetic_measurements(
@@ -70,3 +70,30 @@ def synthetic_measurements(
     table = pd.concat(frames, ignore_index=True)
     table["force_n"] = table["force_n"].round(4)
     return table
+
+
+# The tests of a hidden-effect data set (tests and benchmarks/diagnosis.py): replicates
+# at the reference conditions, one test off them in each condition a built-in effect
+# reads (tension, weft direction, a fast and a slow rate), and two decoy covariates
+# that vary from test to test but never enter the physics.
+HIDDEN_EFFECT_TESTS = (
+    {"test_id": "ref-1", "tension_n": 0.0, "direction": "warp", "rate_deg_s": 90.0},
+    {"test_id": "ref-2", "tension_n": 0.0, "direction": "warp", "rate_deg_s": 90.0},
+    {"test_id": "tension", "tension_n": 20.0, "direction": "warp", "rate_deg_s": 90.0},
+    {"test_id": "weft", "tension_n": 0.0, "direction": "weft", "rate_deg_s": 90.0},
+    {"test_id": "fast", "tension_n": 0.0, "direction": "warp", "rate_deg_s": 900.0},
+    {"test_id": "slow", "tension_n": 0.0, "direction": "warp", "rate_deg_s": 9.0},
+)
+
+
+def hidden_effect_tests(seed: int, tests: Sequence[Mapping[str, Any]] = HIDDEN_EFFECT_TESTS):
+    """``tests`` with decoy covariates ``temperature_c`` and ``humidity_pct`` drawn per test."""
+    rng = np.random.default_rng(seed)
+    return [
+        {
+            **test,
+            "temperature_c": round(float(rng.uniform(19.0, 27.0)), 1),
+            "humidity_pct": round(float(rng.uniform(30.0, 60.0)), 0),
+        }
+        for test in tests
+    ]
