@@ -145,26 +145,38 @@ def diagnose(
     ranking = []
     base_bic = _bic(rss, n_points, len(theta))
     used = set(current.used)
-    for name in names:
-        fit = refits[name]
-        used |= fit.used
+    solver_calls = fitted.solver_calls
+
+    def entry_of(name: str, fit: _Refit) -> dict[str, Any]:
         fit_rss = float(fit.residual @ fit.residual)
-        ranking.append(
-            {
-                "effect": name,
-                "rmse_n": math.sqrt(fit_rss / n_points),
-                "heldout_rmse_n": fit.heldout_rmse,
-                "delta_bic": _bic(fit_rss, n_points, len(fit.theta)) - base_bic,
-                "params": fit.params,
-            }
-        )
+        return {
+            "effect": name,
+            "rmse_n": math.sqrt(fit_rss / n_points),
+            "heldout_rmse_n": fit.heldout_rmse,
+            "delta_bic": _bic(fit_rss, n_points, len(fit.theta)) - base_bic,
+            "params": fit.params,
+        }
+
+    for name in names:
+        used |= refits[name].used
+        ranking.append(entry_of(name, refits[name]))
     ranking.sort(key=lambda e: e["delta_bic"])
+    if systematic and ranking:
+        # a local refit stays in the basin of the current model's optimum (the coat's
+        # third parameter can sit in another); the leaders are recalibrated globally
+        for index, entry in enumerate(ranking):
+            if index > 0 and not _tied(entry, ranking[0]):
+                continue
+            name = entry["effect"]
+            say(f"recalibrating with {name} over the whole parameter space")
+            again, calls = _recalibrate(spec, data, (*chosen, name), name, noise, progress)
+            used |= again.used
+            solver_calls += calls
+            if again.rmse < refits[name].rmse:
+                ranking[index] = entry_of(name, again)
+        ranking.sort(key=lambda e: e["delta_bic"])
     # candidates not decisively worse than the best: the data cannot tell them apart
-    tied = [
-        e["effect"]
-        for e in ranking[1:]
-        if e["delta_bic"] - ranking[0]["delta_bic"] < -DECISIVE_DELTA_BIC
-    ]
+    tied = [e["effect"] for e in ranking[1:] if _tied(e, ranking[0])]
     unexplained, verdict = _verdict(
         rmse, current.heldout_rmse, noise, systematic, p_value, ranking, follows, tied
     )
@@ -182,7 +194,7 @@ def diagnose(
         verdict=verdict,
         effects=list(chosen),
         heldout_rmse_n=current.heldout_rmse,
-        solver_calls=fitted.solver_calls + len(used),
+        solver_calls=solver_calls + len(used),
         ladder=model_ladder(url, spec.name),
     )
     _attach_ladder(url, calibration_study_name(spec, chosen), result)
@@ -385,10 +397,35 @@ def _refit(task: tuple[Any, ...]) -> _Refit:
     )
 
 
+def _recalibrate(
+    spec: Any,
+    data: Any,
+    effects: tuple[str, ...],
+    effect: str,
+    noise: float,
+    progress: bool,
+) -> tuple[_Refit, int]:
+    """:func:`calibrate` with ``effect`` added (not recorded as a ladder step), refitted locally."""
+    found = calibrate(spec, effects=effects, progress=progress, record=False)
+    return _refit((spec, data, effects, effect, found.params, noise)), found.solver_calls
+
+
+def _tied(entry: dict[str, Any], best: dict[str, Any]) -> bool:
+    """Not decisively worse than the best (ΔBIC within 10 of it)."""
+    return entry["delta_bic"] - best["delta_bic"] < -DECISIVE_DELTA_BIC
+
+
 def _jobs(jobs: int | None, tasks: int) -> int:
     if jobs is not None and jobs < 1:
         raise InputDataError(f"jobs must be ≥ 1, got {jobs}")
     return max(1, min(jobs or os.cpu_count() or 1, tasks))
+
+
+def _one_blas_thread() -> None:
+    """Several processes each spinning a BLAS thread pool on the same cores run ~10× slower."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
 
 
 def _map(function: Any, tasks: list[Any], jobs: int) -> Iterator[Any]:
@@ -401,7 +438,9 @@ def _map(function: Any, tasks: list[Any], jobs: int) -> Iterator[Any]:
         yield from map(function, tasks)
         return
     context = multiprocessing.get_context("fork")
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+    with ProcessPoolExecutor(
+        max_workers=jobs, mp_context=context, initializer=_one_blas_thread
+    ) as pool:
         futures = [pool.submit(function, task) for task in tasks]
         try:
             for future in as_completed(futures):
