@@ -218,6 +218,9 @@ def _build_parser() -> argparse.ArgumentParser:
     diag.add_argument("study", type=Path, help="study file with [measurements]")
     _model_options(diag)
     diag.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
+    diag.add_argument(
+        "--jobs", type=int, help="processes for the candidates' refits (default: all CPUs)"
+    )
     diag.add_argument("--json", action="store_true", help="print one JSON object")
     diag.set_defaults(handler=_diagnose)
 
@@ -296,11 +299,14 @@ def _diagnose(args: argparse.Namespace) -> int:
     from ._diagnose import diagnose, write_ladder_plot
     from ._study import load_study
 
+    if args.jobs is not None and args.jobs < 1:
+        raise InputDataError(f"--jobs must be ≥ 1, got {args.jobs}")
     result = diagnose(
         args.study,
         effects=args.effect,
         plugins=args.plugin,
         storage=args.storage,
+        jobs=args.jobs,
         progress=not args.json,
     )
     spec = load_study(args.study)
@@ -323,6 +329,9 @@ def _diagnose(args: argparse.Namespace) -> int:
             f"{entry['effect']:>18} {entry['rmse_n']:9.4f} {entry['heldout_rmse_n']:9.4g} "
             f"{entry['delta_bic']:8.1f}"
         )
+    if result.tied_with:
+        tied = ", ".join(result.tied_with)
+        print(f"as good as the first (these data cannot tell them apart): {tied}")
     print(result.verdict)
     print("model ladder:")
     for step in result.ladder:

@@ -18,12 +18,19 @@
    and registered plug-ins), whose test condition varies in the data, is added and
    recalibrated *locally* with the full solver (a bounded trust-region least-squares
    fit from the calibrated point, finite-difference Jacobian: ``(p+1)·G`` solver
-   runs an iteration); its held-out error comes from leaving one test out of the
-   linearised fit at the optimum (a ridge refit on the other tests), and its BIC penalises
-   the extra parameters. Candidates are ranked by ΔBIC (best first).
+   runs an iteration; the candidates in parallel processes); its held-out error
+   comes from leaving one test out of the linearised fit at the optimum (a ridge
+   refit on the other tests), and its BIC penalises the extra parameters.
+   Candidates are ranked by ΔBIC (best first). A local refit stays in the basin of
+   the current model's optimum, so the leader — and every candidate within ΔBIC
+   10 of it — is recalibrated over the whole space (:func:`calibrate`, not kept
+   as a ladder step) and polished locally again.
 5. **Verdict.** An effect is named only when it is decisive (ΔBIC < −10) *and*
-   cuts the held-out error by at least 10 %; when none brings the error near the
-   noise level, the column the residual follows is named instead.
+   cuts the held-out error by at least 10 %; candidates within ΔBIC 10 of it are
+   reported as fitting as well (``tied_with``: the data cannot tell them apart —
+   ``hardening`` and ``membrane_bending`` are the same moment–curvature law).
+   When none brings the error near the noise level, the column the residual
+   follows is named instead.
 """
 
 from __future__ import annotations
@@ -67,7 +74,12 @@ LOO_PRIOR_UNIT = 0.05  # prior SD of a parameter in the held-out refits, fractio
 
 @dataclass(frozen=True)
 class DiagnosisResult:
-    """Keys of ``surrogate diagnose --json`` (``ranking`` best first)."""
+    """Keys of ``surrogate diagnose --json``.
+
+    ``ranking`` is best first; ``tied_with`` lists the candidates that fit as
+    well as the first (ΔBIC within 10 of it); ``follows`` the columns the
+    residual follows, strongest first; ``ladder`` every calibration of the study.
+    """
 
     rmse_n: float
     noise_n: float

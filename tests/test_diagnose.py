@@ -86,7 +86,9 @@ def test_no_false_alarm_on_data_without_a_hidden_effect(tmp_path, capsys):
     assert deltas == sorted(deltas)
 
 
-@pytest.mark.parametrize("option", [["--effect", "nonsense"], ["--plugin", "no_module_q"]])
+@pytest.mark.parametrize(
+    "option", [["--effect", "nonsense"], ["--plugin", "no_module_q"], ["--jobs", "0"]]
+)
 def test_bad_diagnose_options_are_one_line_errors(tmp_path, capsys, option):
     path = _study(tmp_path, None)
     with pytest.raises(SystemExit) as exit_info:
