@@ -174,19 +174,29 @@ def diagnose(
         ranking.append(entry_of(name, refits[name]))
     ranking.sort(key=lambda e: e["delta_bic"])
     if systematic and ranking:
-        # a local refit stays in the basin of the current model's optimum (the coat's
-        # third parameter can sit in another); the leaders are recalibrated globally
-        for index, entry in enumerate(ranking):
-            if index > 0 and not _tied(entry, ranking[0]):
+        # A local refit stays in the basin of the current model's optimum (the coat's
+        # third parameter can sit in another; a compliant clamp needs a much stiffer
+        # coat than the model without it found). So the leaders are recalibrated over
+        # the whole space — and, before the verdict can be "unexplained", every other
+        # candidate too.
+        leaders = [e["effect"] for e in ranking if _tied(e, ranking[0])]
+        done: set[str] = set()
+        for names_now in (leaders, [e["effect"] for e in ranking]):
+            todo = [name for name in names_now if name not in done]
+            if not todo or (done and ranking[0]["rmse_n"] <= NEAR_NOISE * noise):
                 continue
-            name = entry["effect"]
-            say(f"recalibrating with {name} over the whole parameter space")
-            again, calls = _recalibrate(spec, data, (*chosen, name), name, noise, progress)
-            used |= again.used
-            solver_calls += calls
-            if again.rmse < refits[name].rmse:
-                ranking[index] = entry_of(name, again)
-        ranking.sort(key=lambda e: e["delta_bic"])
+            say(f"recalibrating with {', '.join(todo)} over the whole parameter space")
+            tasks = [(spec, data, (*chosen, name), name, noise) for name in todo]
+            for again, calls in _map(_recalibrate, tasks, _jobs(jobs, len(tasks))):
+                used |= again.used
+                solver_calls += calls
+                if again.rmse < refits[again.effect].rmse:
+                    refits[again.effect] = again
+            done.update(todo)
+            ranking = sorted(
+                (entry_of(e["effect"], refits[e["effect"]]) for e in ranking),
+                key=lambda e: e["delta_bic"],
+            )
     # candidates not decisively worse than the best: the data cannot tell them apart
     tied = [e["effect"] for e in ranking[1:] if _tied(e, ranking[0])]
     unexplained, verdict = _verdict(
@@ -409,16 +419,10 @@ def _refit(task: tuple[Any, ...]) -> _Refit:
     )
 
 
-def _recalibrate(
-    spec: Any,
-    data: Any,
-    effects: tuple[str, ...],
-    effect: str,
-    noise: float,
-    progress: bool,
-) -> tuple[_Refit, int]:
-    """:func:`calibrate` with ``effect`` added (not recorded as a ladder step), refitted locally."""
-    found = calibrate(spec, effects=effects, progress=progress, record=False)
+def _recalibrate(task: tuple[Any, ...]) -> tuple[_Refit, int]:
+    """:func:`calibrate` with the effect added (not a ladder step), then refitted locally."""
+    spec, data, effects, effect, noise = task
+    found = calibrate(spec, effects=effects, progress=False, record=False)
     return _refit((spec, data, effects, effect, found.params, noise)), found.solver_calls
 
 
