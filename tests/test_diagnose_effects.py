@@ -33,6 +33,8 @@ name = "hidden"
 ecoat_gpa = { low = 0.5,  high = 4.0, log = true }
 scoat_gpa = { low = 0.05, high = 0.4, log = true }
 tcoat_mm  = { low = 0.01, high = 0.1, log = true }
+[budget]
+surrogate_trials = 100  # of the search on the surrogate; 300 by default
 [measurements]
 file = "tests.csv"
 """
