@@ -299,8 +299,6 @@ def _diagnose(args: argparse.Namespace) -> int:
     from ._diagnose import diagnose, write_ladder_plot
     from ._study import load_study
 
-    if args.jobs is not None and args.jobs < 1:
-        raise InputDataError(f"--jobs must be ≥ 1, got {args.jobs}")
     result = diagnose(
         args.study,
         effects=args.effect,

@@ -123,6 +123,7 @@ def diagnose(
     jobs : int, optional
         Processes for the local refits (default: the machine's CPUs).
     """
+    _jobs(jobs, 1)  # a bad value fails before any work
     spec, data, chosen, noise = _load(study, effects, plugins)
     url = storage or spec.default_storage()
     say = _Say(progress, f"{spec.name}/diagnose")
@@ -183,13 +184,15 @@ def diagnose(
         done: set[str] = set()
         for names_now in (leaders, [e["effect"] for e in ranking]):
             todo = [name for name in names_now if name not in done]
-            if not todo or (done and ranking[0]["rmse_n"] <= NEAR_NOISE * noise):
+            if not todo or (done and _named(ranking[0], current.heldout_rmse, noise)):
                 continue
             say(f"recalibrating with {', '.join(todo)} over the whole parameter space")
             tasks = [(spec, data, (*chosen, name), name, noise) for name in todo]
             for again, calls in _map(_recalibrate, tasks, _jobs(jobs, len(tasks))):
-                used |= again.used
                 solver_calls += calls
+                if again is None:
+                    continue
+                used |= again.used
                 if again.rmse < refits[again.effect].rmse:
                     refits[again.effect] = again
             done.update(todo)
@@ -199,6 +202,7 @@ def diagnose(
             )
     # candidates not decisively worse than the best: the data cannot tell them apart
     tied = [e["effect"] for e in ranking[1:] if _tied(e, ranking[0])]
+    named = systematic and bool(ranking) and _named(ranking[0], current.heldout_rmse)
     unexplained, verdict = _verdict(
         rmse, current.heldout_rmse, noise, systematic, p_value, ranking, follows, tied
     )
@@ -210,8 +214,8 @@ def diagnose(
         p_value=p_value,
         where=where,
         follows=follows,
-        ranking=[{k: v for k, v in e.items()} for e in ranking],
-        tied_with=tied if systematic else [],
+        ranking=ranking,
+        tied_with=tied if named else [],
         unexplained=unexplained,
         verdict=verdict,
         effects=list(chosen),
@@ -419,11 +423,23 @@ def _refit(task: tuple[Any, ...]) -> _Refit:
     )
 
 
-def _recalibrate(task: tuple[Any, ...]) -> tuple[_Refit, int]:
+def _recalibrate(task: tuple[Any, ...]) -> tuple[_Refit | None, int]:
     """:func:`calibrate` with the effect added (not a ladder step), then refitted locally."""
     spec, data, effects, effect, noise = task
-    found = calibrate(spec, effects=effects, progress=False, record=False)
-    return _refit((spec, data, effects, effect, found.params, noise)), found.solver_calls
+    try:
+        found = calibrate(spec, effects=effects, progress=False, record=False)
+        return _refit((spec, data, effects, effect, found.params, noise)), found.solver_calls
+    except (InputDataError, _Failed):
+        return None, 0  # the solver failed wherever the search looked: keep the local refit
+
+
+def _named(best: dict[str, Any], heldout: float, noise: float | None = None) -> bool:
+    """Decisive (ΔBIC < −10) and cuts the held-out error ≥ 10 %; with ``noise``: and
+    brings the RMSE near it (nothing left to look for)."""
+    decisive = (
+        best["delta_bic"] < DECISIVE_DELTA_BIC and best["heldout_rmse_n"] < HELDOUT_GAIN * heldout
+    )
+    return decisive and (noise is None or best["rmse_n"] <= NEAR_NOISE * noise)
 
 
 def _tied(entry: dict[str, Any], best: dict[str, Any]) -> bool:
@@ -452,6 +468,9 @@ def _map(function: Any, tasks: list[Any], jobs: int) -> Iterator[Any]:
     """
     if jobs == 1:
         yield from map(function, tasks)
+        return
+    if "fork" not in multiprocessing.get_all_start_methods():
+        yield from map(function, tasks)  # no fork (Windows): plug-ins would be lost; serially
         return
     context = multiprocessing.get_context("fork")
     with ProcessPoolExecutor(
@@ -508,6 +527,9 @@ def _local_fit(
         return jac
 
     unit = np.clip(space.to_unit(theta[None, :])[0], 0.0, 1.0)
+    # at a bound: within a hair of it (trf keeps its iterates strictly inside) or
+    # what the refit itself reports as an active bound
+    at_bound = np.where(unit <= 1e-6, -1, np.where(unit >= 1.0 - 1e-6, 1, 0))
     if refit:
         try:
             found = least_squares(
@@ -520,15 +542,17 @@ def _local_fit(
                 xtol=1e-5,
             )
             unit = found.x
+            at_bound = np.where(found.active_mask != 0, found.active_mask, 0)
+            at_bound = np.where(unit <= 1e-6, -1, np.where(unit >= 1.0 - 1e-6, 1, at_bound))
         except _Failed:
-            pass  # keep the last good point: the refit could not run everywhere
+            pass  # keep the start: the refit could not run everywhere
     residual, curves = evaluate(unit)
     jac = jacobian(unit)
     return _Fit(
         space.from_unit(unit[None, :])[0],
         residual,
         curves,
-        _heldout(problem, residual, jac, unit, noise),
+        _heldout(problem, residual, jac, at_bound, noise),
     )
 
 
@@ -540,7 +564,7 @@ def _heldout(
     problem: CalibrationProblem,
     residual: np.ndarray,
     jac: np.ndarray,
-    unit: np.ndarray,
+    at_bound: np.ndarray,
     noise: float,
 ) -> float:
     """Leave-one-test-out RMSE of the linearised fit at the optimum.
@@ -550,11 +574,13 @@ def _heldout(
     around the full-data fit (ridge ``λ = noise²/σ²``), so a parameter only the
     left-out test determines (the weft factor of a lone weft test) stays where
     the full data put it instead of running off — then the left-out test is
-    predicted. A parameter held at a bound of its range (the fit pushes against
-    it) stays there: the linearisation knows no bounds.
+    predicted. A parameter held at a bound of its range (``at_bound``: −1 lower,
+    +1 upper, and the fit pushes against it) stays there: the linearisation knows
+    no bounds.
     """
     gradient = jac.T @ residual
-    active = ((unit <= 1e-9) & (gradient > 0)) | ((unit >= 1.0 - 1e-9) & (gradient < 0))
+    # held at a bound: the fit pushes against it (descent direction −gradient points out)
+    active = ((at_bound < 0) & (gradient > 0)) | ((at_bound > 0) & (gradient < 0))
     jac = jac[:, ~active]
     gradient = gradient[~active]
     ridge = (noise / LOO_PRIOR_UNIT) ** 2 * np.eye(jac.shape[1])
@@ -621,11 +647,7 @@ def _verdict(
             f"(p = {p_value:.2g}); no effect needed"
         )
     best = ranking[0] if ranking else None
-    named = (
-        best is not None
-        and best["delta_bic"] < DECISIVE_DELTA_BIC
-        and best["heldout_rmse_n"] < HELDOUT_GAIN * heldout
-    )
+    named = best is not None and _named(best, heldout)
     if named and best is not None:
         why = f"residual follows {column}; " if column else ""
         text = (
