@@ -693,7 +693,9 @@ class _Loop:
             )
             if found.fun < result_f:
                 result_x, result_f = found.x, float(found.fun)
-        return space.from_unit(np.clip(result_x, 0.0, 1.0)[None, :])[0], result_f
+        theta = space.from_unit(np.clip(result_x, 0.0, 1.0)[None, :])[0]
+        # exp∘log may round a bound past itself; the verification stays inside
+        return np.clip(theta, [p.low for p in space], [p.high for p in space]), result_f
 
 
 def _record(
@@ -719,7 +721,9 @@ def _record(
         key = hashlib.sha256("".join(item["keys"]).encode()).hexdigest()
         if key in known:
             continue
-        params = dict(zip(problem.space.names, map(float, item["theta"]), strict=True))
+        space = problem.space
+        inside = np.clip(item["theta"], [p.low for p in space], [p.high for p in space])
+        params = dict(zip(problem.space.names, map(float, inside), strict=True))
         trial = optuna.trial.create_trial(
             params=params,
             distributions=distributions,
