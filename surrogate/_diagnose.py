@@ -529,7 +529,7 @@ def _local_fit(
     unit = np.clip(space.to_unit(theta[None, :])[0], 0.0, 1.0)
     # at a bound: within a hair of it (trf keeps its iterates strictly inside) or
     # what the refit itself reports as an active bound
-    at_bound = np.where(unit <= 1e-6, -1, np.where(unit >= 1.0 - 1e-6, 1, 0))
+    at_bound = _near_bound(unit, np.zeros(unit.size, dtype=int))
     if refit:
         try:
             found = least_squares(
@@ -542,8 +542,7 @@ def _local_fit(
                 xtol=1e-5,
             )
             unit = found.x
-            at_bound = np.where(found.active_mask != 0, found.active_mask, 0)
-            at_bound = np.where(unit <= 1e-6, -1, np.where(unit >= 1.0 - 1e-6, 1, at_bound))
+            at_bound = _near_bound(unit, found.active_mask)
         except _Failed:
             pass  # keep the start: the refit could not run everywhere
     residual, curves = evaluate(unit)
@@ -554,6 +553,11 @@ def _local_fit(
         curves,
         _heldout(problem, residual, jac, at_bound, noise),
     )
+
+
+def _near_bound(unit: np.ndarray, active: np.ndarray) -> np.ndarray:
+    """−1/+1 where ``unit`` is within a hair of its lower/upper bound, else ``active``."""
+    return np.where(unit <= 1e-6, -1, np.where(unit >= 1.0 - 1e-6, 1, active))
 
 
 class _Failed(Exception):
