@@ -27,7 +27,7 @@ import json
 import sys
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -42,11 +42,15 @@ from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
 from ._batch import solve_inputs, solver_inputs
 from ._cache import ResultCache, input_hash
 from ._conditions import CONDITIONS
+from ._determination import determine
 from ._errors import InputDataError
+from ._local import FIRST_ORDER_BOX, LocalFit, ResidualModel, SolverFailed, local_fit
 from ._measurements import MeasurementSet, load_measurements
 from ._simulate import model_state_of
 from ._space import ParameterSpace, ParameterSpec
+from ._statistics import SIGNIFICANCE, misfit_p_value, noise_dof
 from ._study import StudySpec, load_study
+from ._units import gpa_to_mpa
 from .effects import ModelState, get_effect, load_plugin
 from .physics import bending_stiffness, plastic_moment
 
@@ -63,8 +67,9 @@ RIG_CONDITIONS = ("tension_n", "bending_length_mm", "width_mm")
 FORCE_SCALE_N = 0.02  # asinh(F/s): logarithmic above ~s, linear through 0
 DEFAULT_CALIBRATION_CALLS = 200
 _SEARCH_BATCH = 25
-SETTLED = 0.01  # relative RMSE improvement below which the loop has settled
-STALE_LIMIT = 4
+SETTLED = 0.01  # relative RMSE improvement below which the global phase has settled
+STALE_LIMIT = 2  # the local phase finishes what the global one leaves
+BASIN_CHECKS = 3  # local fits at most: the first basin and up to two others the surrogate shows
 
 
 # -- the problem: parameters, condition groups, measured points ------------------------------
@@ -380,6 +385,19 @@ class CalibrationResult:
     parameters as ``effect.param``); ``rmse_n`` the RMSE over all measured
     points, verified by the full solver; ``solver_calls`` the full-solver runs
     this calibration used (a run already in the result cache is not repeated).
+
+    ``status`` is ``converged`` only when the local phase's first-order test held
+    at ``params`` (a verified point; see :mod:`surrogate._local`), else
+    ``budget_exhausted`` (``params`` is then the best verified point).
+    ``predicted_gain`` is what that test measured: the relative RMSE decrease the
+    Gauss–Newton model still promises within ±5 % of each range. With
+    ``converged``: ``misfit`` is ``"within the noise"`` or ``"systematic"`` by the
+    F-test of the RSS against the noise (``misfit_p_value``; systematic below
+    0.01), and ``determination`` says what the curves determine (the keys of
+    :class:`~surrogate._determination.Determination`: 95 % intervals of the
+    bending stiffness ``bending_stiffness_nmm`` [N·mm/mm], the plastic moment
+    ``plastic_moment_n`` [N·mm/mm] and each parameter, the free parameters, those
+    held at a bound). Both are ``None`` unless ``converged``.
     """
 
     params: dict[str, float]
@@ -389,6 +407,10 @@ class CalibrationResult:
     effects: list[str]
     rmse_per_test_n: dict[str, float]
     status: str
+    predicted_gain: float
+    misfit: str | None
+    misfit_p_value: float | None
+    determination: dict[str, Any] | None
     iterations: int
     study: str
     storage: str
@@ -413,13 +435,26 @@ class _Runs:
         self.failures: list[str] = []
         self._seen: set[tuple[str, int]] = set()
 
-    def run(self, thetas: np.ndarray, groups: Sequence[int]) -> list[dict[str, Any] | None]:
-        """Solve each (theta, group); the curves (on whole degrees) or None if failed."""
+    def _items(
+        self, thetas: np.ndarray, groups: Sequence[int]
+    ) -> list[tuple[np.ndarray, int, dict[str, Any]]]:
         names = self.problem.space.names
-        items = [
+        return [
             (theta, g, self.problem.inputs(dict(zip(names, theta, strict=True)), g))
             for theta, g in zip(thetas, groups, strict=True)
         ]
+
+    def keys(self, thetas: np.ndarray, groups: Sequence[int]) -> list[str]:
+        """The result-cache keys of these runs."""
+        return [input_hash(inputs) for _, _, inputs in self._items(thetas, groups)]
+
+    def cost(self, thetas: np.ndarray, groups: Sequence[int]) -> int:
+        """Solver runs that :meth:`run` would add to :attr:`calls`."""
+        return len(set(self.keys(thetas, groups)) - self.used)
+
+    def run(self, thetas: np.ndarray, groups: Sequence[int]) -> list[dict[str, Any] | None]:
+        """Solve each (theta, group); the curves (on whole degrees) or None if failed."""
+        items = self._items(thetas, groups)
         keys = [input_hash(inputs) for _, _, inputs in items]
         results: dict[int, dict[str, Any]] = {}
         todo = []
@@ -525,37 +560,90 @@ def calibrate(
     name = calibration_study_name(spec, chosen)
     runs = _Runs(problem, spec.directory / ".solver-cache", jobs=jobs)
     loop = _Loop(problem, runs, budget=budget, seed=spec.seed, progress=progress, label=name)
-    best = loop.run(spec.budget.surrogate_trials)
+    loop.run(spec.budget.surrogate_trials)
+    fit, best = loop.best_fit(), loop.best()
     if best is None:
         reason = runs.failures[0] if runs.failures else "no verification fitted in the budget"
         raise InputDataError(
             f"calibration of {name} found no parameter point the solver could run at every "
             f"test ({reason}); check the parameter ranges"
         )
-    params = dict(zip(problem.space.names, map(float, best["theta"]), strict=True))
-    status = "converged" if loop.converged else "budget_exhausted"
-    rmse = float(best["rmse"])
-    message = (
-        f"{model_label(chosen)}: RMSE {rmse:.4g} N over {problem.n_points} points of "
-        f"{len(problem.test_ids)} tests, noise {noise:.4g} N ({rmse / noise:.2f}× noise), "
-        f"{runs.calls} solver calls, {status}"
-    )
+    # converged: the best verified point is a local optimum the first-order test passed
+    converged = fit is not None and fit.converged and fit.rmse <= best["rmse"]
+    theta = best["theta"]
+    misfit, p_value, determination = None, None, None
+    if fit is not None and converged:
+        rss = float(fit.residual @ fit.residual)
+        dof_noise = noise_dof(spec.noise_n is not None, data.noise_dof)
+        p_value = misfit_p_value(rss, problem.n_points - len(theta), noise, dof_noise)
+        misfit = "within the noise" if p_value >= SIGNIFICANCE else "systematic"
+        determination = _determination(problem, fit).to_json()
+    status = "converged" if converged else "budget_exhausted"
     result = CalibrationResult(
-        params=params,
-        rmse_n=rmse,
+        params=dict(zip(problem.space.names, map(float, theta), strict=True)),
+        rmse_n=float(best["rmse"]),
         noise_n=noise,
         solver_calls=runs.calls,
         effects=list(chosen),
         rmse_per_test_n=best["per_test"],
         status=status,
+        predicted_gain=fit.predicted_gain if fit is not None else float("inf"),
+        misfit=misfit,
+        misfit_p_value=p_value,
+        determination=determination,
         iterations=loop.iterations,
         study=name,
         storage=url,
-        message=message,
+        message="",
     )
+    result = replace(result, message=_message(problem, result, fit))
     if record:
         _record(url, name, problem, loop.verified, result, data_hash(spec))
     return result
+
+
+def _determination(problem: CalibrationProblem, fit: LocalFit) -> Any:
+    """What the curves determine at a converged local fit (bending stiffness, plastic
+    moment per unit width, every parameter)."""
+    space, thickness = problem.space, problem.spec.rig.thickness_mm
+
+    def stiffness(p: Mapping[str, float]) -> float:
+        return bending_stiffness(gpa_to_mpa(p["ecoat_gpa"]), p["tcoat_mm"], thickness)
+
+    def moment(p: Mapping[str, float]) -> float:
+        return plastic_moment(gpa_to_mpa(p["scoat_gpa"]), p["tcoat_mm"], thickness)
+
+    return determine(
+        space.names,
+        np.array([p.low for p in space]),
+        np.array([p.high for p in space]),
+        np.array([p.log for p in space]),
+        fit.theta,
+        fit.jacobian,
+        fit.residual,
+        fit.at_bound,
+        combinations={
+            "bending_stiffness_nmm": ("D ∝ Ecoat·Tcoat", stiffness),
+            "plastic_moment_n": ("Mp ∝ Scoat·Tcoat", moment),
+        },
+    )
+
+
+def _message(problem: CalibrationProblem, result: CalibrationResult, fit: LocalFit | None) -> str:
+    rmse, noise = result.rmse_n, result.noise_n
+    text = (
+        f"{model_label(result.effects)}: RMSE {rmse:.4g} N over {problem.n_points} points of "
+        f"{len(problem.test_ids)} tests, noise {noise:.4g} N ({rmse / noise:.2f}× noise), "
+        f"{result.solver_calls} solver calls, {result.status}"
+    )
+    if result.status != "converged":
+        why = fit.message if fit is not None else "the local phase did not run"
+        return f"{text} ({why}; best verified point so far — raise --budget)"
+    assert result.determination is not None
+    return (
+        f"{text} ({fit.message if fit else ''}); {result.misfit} (F-test p = "
+        f"{result.misfit_p_value:.2g}); {result.determination['statement']}"
+    )
 
 
 def data_hash(spec: StudySpec) -> str:
@@ -565,7 +653,19 @@ def data_hash(spec: StudySpec) -> str:
 
 
 class _Loop:
-    """Initial design, then search on the surrogate and verify, until it settles."""
+    """The global phase on the surrogate, then the local phase with the full solver.
+
+    1. *Global*: an initial design, then search on the surrogate and verify, until
+       the surrogate sees nothing better than the best verified point (or
+       ``STALE_LIMIT`` verifications bring no improvement). It finds the basin; it
+       proves nothing.
+    2. *Local*: :func:`~surrogate._local.local_fit` from the best verified point,
+       until the first-order test holds at a verified point.
+    3. *Other basins*: the surrogate, refitted on every run so far, is searched
+       again; where it predicts a fit better than the best local optimum outside
+       that optimum's first-order box, the point is verified and, if it is better,
+       fitted locally too (at most ``BASIN_CHECKS`` searches).
+    """
 
     def __init__(
         self,
@@ -580,7 +680,7 @@ class _Loop:
         self.problem, self.runs, self.budget = problem, runs, budget
         self.seed, self.progress, self.label = seed, progress, label
         self.verified: list[dict[str, Any]] = []
-        self.converged = False
+        self.fits: list[LocalFit] = []
         self.iterations = 0
 
     def _say(self, text: str) -> None:
@@ -590,7 +690,21 @@ class _Loop:
     def best(self) -> dict[str, Any] | None:
         return min(self.verified, key=lambda v: v["rmse"]) if self.verified else None
 
-    def run(self, surrogate_trials: int) -> dict[str, Any] | None:
+    def best_fit(self) -> LocalFit | None:
+        return min(self.fits, key=lambda f: f.rmse) if self.fits else None
+
+    def run(self, surrogate_trials: int) -> None:
+        model = CurveSurrogate(self.problem, seed=self.seed)
+        self._global(model, surrogate_trials)
+        start = self.best()
+        residuals = ResidualModel(self.problem, self.runs, budget=self.budget)
+        for _ in range(BASIN_CHECKS):
+            if start is None:
+                return
+            self._local(residuals, start)
+            start = self._other_basin(model, surrogate_trials)
+
+    def _global(self, model: CurveSurrogate, surrogate_trials: int) -> None:
         problem = self.problem
         d, G = len(problem.space), len(problem.groups)
         n0 = max(2 * d + 2, 2 * G)
@@ -598,23 +712,19 @@ class _Loop:
         thetas = problem.space.from_unit(unit)
         self.runs.run(thetas, [i % G for i in range(n0)])
         self._say(f"initial design: {self.runs.calls} solver runs ({G} condition groups)")
-        model = CurveSurrogate(problem, seed=self.seed)
-        stale = 0
-        while self.runs.calls + G <= self.budget:
+        # the local phase needs what is left: the global phase takes at most half the budget
+        stale, budget = 0, max(self.budget // 2, self.runs.calls + G)
+        while self.runs.calls + G <= budget and len(self.runs.X) >= 3:
             self.iterations += 1
-            if len(self.runs.X) < 3:
-                return self.best()
-            model.fit(np.array(self.runs.X), np.array(self.runs.groups), np.array(self.runs.curves))
+            self._fit(model)
             candidate, predicted = self._search(model, surrogate_trials)
             previous = self.best()
             if previous is not None and predicted >= (1.0 - SETTLED) * previous["rmse"]:
-                # nowhere does the surrogate see a fit better than the best verified one
-                self.converged = True
                 self._say(
-                    f"settled: the surrogate's best RMSE {predicted:.4g} N does not "
+                    f"global phase done: the surrogate's best RMSE {predicted:.4g} N does not "
                     f"beat the best verified {previous['rmse']:.4g} N"
                 )
-                break
+                return
             verified = self._verify(candidate, predicted)
             if verified is None:
                 stale += 1
@@ -626,10 +736,60 @@ class _Loop:
                     f"best {self.best()['rmse']:.4g} N, {self.runs.calls} solver calls"
                 )
             if stale >= STALE_LIMIT:
-                self.converged = True
-                self._say(f"settled: {STALE_LIMIT} verifications without improvement")
-                break
-        return self.best()
+                self._say(f"global phase done: {STALE_LIMIT} verifications without improvement")
+                return
+
+    def _fit(self, model: CurveSurrogate) -> None:
+        runs = self.runs
+        model.fit(np.array(runs.X), np.array(runs.groups), np.array(runs.curves))
+
+    def _local(self, residuals: ResidualModel, start: dict[str, Any]) -> None:
+        self._say(f"local phase from the verified point at RMSE {start['rmse']:.4g} N")
+        try:
+            fit = local_fit(residuals, start["theta"])
+        except SolverFailed as failed:
+            self._say(f"local phase not started: the solver failed at the start ({failed})")
+            return
+        self.fits.append(fit)
+        self.verified.append(
+            {
+                "theta": fit.theta,
+                "rmse": fit.rmse,
+                "per_test": self.problem.rmse_per_test(fit.curves),
+                "predicted": None,
+                "keys": residuals.keys(fit.unit),
+                "curves": fit.curves,
+                "calls": self.runs.calls,
+                "phase": "local",
+            }
+        )
+        self._say(
+            f"local phase: RMSE {fit.rmse:.4g} N, {self.runs.calls} solver calls; {fit.message}"
+        )
+
+    def _other_basin(self, model: CurveSurrogate, surrogate_trials: int) -> dict[str, Any] | None:
+        """A verified start in another basin the surrogate shows, or None."""
+        best = self.best_fit()
+        G = len(self.problem.groups)
+        if best is None or not best.converged or self.runs.calls + G > self.budget:
+            return None
+        self.iterations += 1
+        self._fit(model)
+        candidate, predicted = self._search(model, surrogate_trials)
+        unit = self.problem.space.to_unit(candidate[None, :])[0]
+        near = any(np.max(np.abs(unit - f.unit)) <= FIRST_ORDER_BOX for f in self.fits)
+        if near or predicted >= (1.0 - SETTLED) * best.rmse:
+            self._say(
+                f"no other basin: the surrogate's best ({predicted:.4g} N) is "
+                + ("at a local optimum" if near else f"no better than {best.rmse:.4g} N")
+            )
+            return None
+        verified = self._verify(candidate, predicted)
+        if verified is None or verified["rmse"] >= best.rmse:
+            self._say("another basin the surrogate showed is not better when verified")
+            return None
+        self._say(f"another basin: verified RMSE {verified['rmse']:.4g} N; fitting it locally")
+        return verified
 
     def _verify(self, theta: np.ndarray, predicted: float) -> dict[str, Any] | None:
         G = len(self.problem.groups)
@@ -645,6 +805,7 @@ class _Loop:
             "keys": [o["key"] for o in out],  # type: ignore[index]
             "curves": curves,
             "calls": self.runs.calls,
+            "phase": "global",
         }
         self.verified.append(record)
         return record
@@ -730,6 +891,7 @@ def _record(
             value=item["rmse"],
             user_attrs={
                 "verification_key": key,
+                "phase": item["phase"],
                 "predicted_rmse_n": item["predicted"],
                 "rmse_per_test_n": item["per_test"],
                 "solver_calls": item["calls"],
@@ -740,3 +902,33 @@ def _record(
         study.add_trial(trial)
     study.set_user_attr("result", json.loads(json.dumps(result.to_json())))
     study.set_user_attr("data_sha256", data_sha)
+    _note(study, calibration_note(result.to_json()))
+
+
+def calibration_note(result: Mapping[str, Any]) -> list[str]:
+    """The calibration's status and what the curves determine, as Markdown lines
+    (the dashboard note of the calibration study; compare and diagnose repeat it)."""
+    lines = [f"## Calibration: {result['status']}", "", result["message"]]
+    determination = result.get("determination")
+    if determination:
+        lines += ["", "| quantity | value | 95 % interval |", "|---|---|---|"]
+        for key, c in determination["combinations"].items():
+            span = "not determined" if c["low"] is None else f"{c['low']:.4g} – {c['high']:.4g}"
+            lines.append(f"| {key} | {c['value']:.4g} | {span} |")
+        for name, value in result["params"].items():
+            interval = determination["intervals"].get(name)
+            span = (
+                "held at a bound" if interval is None else f"{interval[0]:.4g} – {interval[1]:.4g}"
+            )
+            free = " (free within its range)" if name in determination["free"] else ""
+            lines.append(f"| {name} | {value:.4g} | {span}{free} |")
+    return lines
+
+
+def _note(study: optuna.Study, lines: list[str]) -> None:
+    """Markdown note of the study in optuna-dashboard (skipped without it)."""
+    try:
+        from optuna_dashboard import save_note
+    except ImportError:
+        return
+    save_note(study, "\n".join(lines))

@@ -48,7 +48,6 @@ from typing import Any
 import numpy as np
 import optuna
 from scipy import stats
-from scipy.optimize import least_squares
 
 from ._calibrate import (
     CalibrationProblem,
@@ -60,11 +59,12 @@ from ._calibrate import (
 )
 from ._compare import BANDS, _bands, column_values
 from ._errors import InputDataError
+from ._local import ResidualModel, SolverFailed, local_fit
+from ._statistics import SIGNIFICANCE, bic, misfit_p_value, noise_dof
 from .effects import available_effects, get_effect
 
 __all__ = ["DiagnosisResult", "diagnose", "model_ladder"]
 
-SIGNIFICANCE = 0.01  # family-wise level of every test (Bonferroni within a family)
 DECISIVE_DELTA_BIC = -10.0  # "very strong" evidence (Kass & Raftery 1995)
 HELDOUT_GAIN = 0.9  # a named effect cuts the held-out RMSE by ≥ 10 %
 NEAR_NOISE = 1.3  # an RMSE within 1.3× noise is explained
@@ -142,12 +142,12 @@ def diagnose(
             say(f"+ {refit.effect}: RMSE {refit.rmse:.4g} N, held-out {refit.heldout_rmse:.4g} N")
     current = refits[None]
     theta = current.theta
-    dof_noise = math.inf if spec.noise_n is not None or not data.noise_dof else data.noise_dof
+    dof_noise = noise_dof(spec.noise_n is not None, data.noise_dof)
     n_points = problem.n_points
     residual = current.residual
     rss = float(residual @ residual)
     rmse = math.sqrt(rss / problem.n_points)
-    p_value = _f_test(rss, n_points - len(theta), noise, dof_noise)
+    p_value = misfit_p_value(rss, n_points - len(theta), noise, dof_noise)
     systematic = p_value < SIGNIFICANCE
     where = _where(problem, residual, current.curves, noise, dof_noise)
     follows = _follows(problem, residual, noise)
@@ -156,7 +156,7 @@ def diagnose(
         f"{'systematic' if systematic else 'within the noise'} (p = {p_value:.2g})"
     )
     ranking = []
-    base_bic = _bic(rss, n_points, len(theta))
+    base_bic = bic(rss, n_points, len(theta))
     used = set(current.used)
     solver_calls = fitted.solver_calls
 
@@ -166,7 +166,7 @@ def diagnose(
             "effect": name,
             "rmse_n": math.sqrt(fit_rss / n_points),
             "heldout_rmse_n": fit.heldout_rmse,
-            "delta_bic": _bic(fit_rss, n_points, len(fit.theta)) - base_bic,
+            "delta_bic": bic(fit_rss, n_points, len(fit.theta)) - base_bic,
             "params": fit.params,
         }
 
@@ -277,21 +277,7 @@ class _Say:
             print(f"[{self.label}] {text}", file=sys.stderr, flush=True)
 
 
-# -- statistics ---------------------------------------------------------------------------------
-def _f_test(rss: float, dof: int, noise: float, dof_noise: float) -> float:
-    """P-value of "the residuals are noise": (RSS/dof)/s² ~ F(dof, dof_noise)."""
-    if dof <= 0:
-        return 1.0
-    ratio = rss / dof / noise**2
-    if math.isinf(dof_noise):
-        return float(stats.chi2.sf(ratio * dof, dof))
-    return float(stats.f.sf(ratio, dof, dof_noise))
-
-
-def _bic(rss: float, n: int, k: int) -> float:
-    return n * math.log(rss / n) + k * math.log(n)
-
-
+# -- where the model fails ----------------------------------------------------------------------
 def _where(
     problem: CalibrationProblem,
     residual: np.ndarray,
@@ -318,7 +304,7 @@ def _where(
     found = []
     for kind, name, mask in cells:
         r = residual[mask]
-        p = _f_test(float(r @ r), r.size, noise, dof_noise)
+        p = misfit_p_value(float(r @ r), r.size, noise, dof_noise)
         if p * len(cells) < SIGNIFICANCE:
             found.append(
                 {
@@ -411,7 +397,7 @@ def _refit(task: tuple[Any, ...]) -> _Refit:
     spec, data, effects, effect, params, noise = task
     problem = CalibrationProblem(spec, data, effects)
     runs = _Runs(problem, spec.directory / ".solver-cache", jobs=1)
-    fit = _local_fit(problem, runs, _start(problem, params), refit=True, noise=noise)
+    fit = _local_fit(problem, runs, _start(problem, params), noise=noise)
     return _Refit(
         effect,
         fit.theta,
@@ -485,79 +471,33 @@ def _map(function: Any, tasks: list[Any], jobs: int) -> Iterator[Any]:
             raise
 
 
+def _local_fit(
+    problem: CalibrationProblem, runs: _Runs, theta: np.ndarray, *, noise: float
+) -> _Fit:
+    """The shared local phase from ``theta`` (looser tolerances, one round: a refit ranks
+    candidates, it does not certify an optimum); LOO-test error of the linearised fit."""
+    try:
+        fit = local_fit(
+            ResidualModel(problem, runs),
+            theta,
+            ftol=1e-4,
+            xtol=1e-5,
+            max_evaluations=_LOCAL_EVALS,
+            jacobian_refresh=1,
+            rounds=1,
+        )
+    except SolverFailed as failed:
+        raise _Failed(str(failed)) from failed
+    heldout = _heldout(problem, fit.residual, fit.jacobian, fit.at_bound, noise)
+    return _Fit(fit.theta, fit.residual, fit.curves, heldout)
+
+
 @dataclass
 class _Fit:
     theta: np.ndarray
     residual: np.ndarray
     curves: np.ndarray
     heldout_rmse: float
-
-
-def _local_fit(
-    problem: CalibrationProblem, runs: _Runs, theta: np.ndarray, *, refit: bool, noise: float
-) -> _Fit:
-    """Least squares from ``theta`` with the full solver; LOO-test error of the linearised fit."""
-    space = problem.space
-    G = len(problem.groups)
-    memo: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
-
-    def evaluate(unit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        key = np.round(unit, 12).tobytes()
-        if key not in memo:
-            point = space.from_unit(np.clip(unit, 0.0, 1.0)[None, :])[0]
-            out = runs.run(np.repeat(point[None, :], G, axis=0), list(range(G)))
-            if any(o is None for o in out):
-                raise _Failed(runs.failures[-1] if runs.failures else "solver failed")
-            curves = np.array([o["curve"] for o in out])  # type: ignore[index]
-            memo[key] = (problem.residuals(curves), curves)
-        return memo[key]
-
-    def jacobian(unit: np.ndarray) -> np.ndarray:
-        """Forward differences of 1e-3 in unit coordinates (inwards at a bound)."""
-        residual = evaluate(unit)[0]
-        jac = np.empty((residual.size, unit.size))
-        for j in range(unit.size):
-            step = 1e-3 if unit[j] + 1e-3 <= 1.0 else -1e-3
-            shifted = unit.copy()
-            shifted[j] += step
-            try:
-                jac[:, j] = (evaluate(shifted)[0] - residual) / step
-            except _Failed:
-                jac[:, j] = 0.0
-        return jac
-
-    unit = np.clip(space.to_unit(theta[None, :])[0], 0.0, 1.0)
-    # at a bound: within a hair of it (trf keeps its iterates strictly inside) or
-    # what the refit itself reports as an active bound
-    at_bound = _near_bound(unit, np.zeros(unit.size, dtype=int))
-    if refit:
-        try:
-            found = least_squares(
-                lambda u: evaluate(u)[0],
-                unit,
-                jac=jacobian,
-                bounds=(0.0, 1.0),
-                max_nfev=_LOCAL_EVALS,
-                ftol=1e-4,
-                xtol=1e-5,
-            )
-            unit = found.x
-            at_bound = _near_bound(unit, found.active_mask)
-        except _Failed:
-            pass  # keep the start: the refit could not run everywhere
-    residual, curves = evaluate(unit)
-    jac = jacobian(unit)
-    return _Fit(
-        space.from_unit(unit[None, :])[0],
-        residual,
-        curves,
-        _heldout(problem, residual, jac, at_bound, noise),
-    )
-
-
-def _near_bound(unit: np.ndarray, active: np.ndarray) -> np.ndarray:
-    """−1/+1 where ``unit`` is within a hair of its lower/upper bound, else ``active``."""
-    return np.where(unit <= 1e-6, -1, np.where(unit >= 1.0 - 1e-6, 1, active))
 
 
 class _Failed(Exception):

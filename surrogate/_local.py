@@ -1,0 +1,267 @@
+"""The local phase: bounded trust-region least squares with the full solver.
+
+Used by ``calibrate`` (to finish what the surrogate search started, until a local
+optimum is verified) and by ``diagnose`` (its local refits of each candidate
+effect). One implementation for both.
+
+Notations
+---------
+``p``
+    Number of calibrated parameters; ``G`` condition groups; ``n`` measured points.
+``u`` : (p,)
+    Parameters in the unit cube (log-scaled where declared, see :class:`ParameterSpace`).
+``r(u)`` : (n,)
+    Measured minus model force at every measured point [N]; one evaluation is ``G``
+    full-solver runs (one per condition group).
+``J`` : (n, p)
+    ``∂r/∂u`` by forward differences of ``FD_STEP_UNIT`` (inwards at an upper
+    bound): ``p·G`` solver runs. Between two such Jacobians ``least_squares`` may
+    be given Broyden's rank-one update of the last one (``jacobian_refresh``).
+
+First-order test (what ``converged`` means)
+-------------------------------------------
+At the final point, with a fresh finite-difference ``J``: the Gauss–Newton model
+``‖r + J s‖`` over every step ``s`` inside the bounds and within ``±FIRST_ORDER_BOX``
+of each range promises an RMSE at most ``FIRST_ORDER_GAIN`` (relative) below the
+verified one. A parameter held at a bound is allowed to stay there: the step
+is bounded.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares, lsq_linear
+
+__all__ = ["BudgetSpent", "LocalFit", "ResidualModel", "SolverFailed", "local_fit"]
+
+FD_STEP_UNIT = 1e-3  # 0.1 % of a range: far above the solver's 1e-9 Newton tolerance
+FIRST_ORDER_BOX = 0.05  # the first-order test looks ±5 % of each range around the point
+FIRST_ORDER_GAIN = 1e-3  # …and asks that no step there promise 0.1 % lower RMSE
+AT_BOUND_UNIT = 1e-6  # trf keeps its iterates strictly inside: within this, at the bound
+_ROUNDS = 4  # least_squares restarts (fresh Jacobian) while the first-order test fails
+
+
+class SolverFailed(RuntimeError):
+    """The full solver failed at the point a local fit starts from."""
+
+
+class BudgetSpent(RuntimeError):
+    """The next evaluation would exceed the budget of full-solver runs."""
+
+
+class ResidualModel:
+    """``r(u)`` and ``J(u)`` through the full solver, memoised, within a run budget.
+
+    Parameters
+    ----------
+    problem : CalibrationProblem
+        Parameters, condition groups and measured points.
+    runs : _Runs
+        Full-solver runs through the result cache (counts the runs used).
+    budget : int, optional
+        Most full-solver runs ``runs`` may have used; an evaluation that would
+        exceed it raises :class:`BudgetSpent`.
+    """
+
+    def __init__(self, problem: Any, runs: Any, *, budget: int | None = None) -> None:
+        self.problem, self.runs, self.budget = problem, runs, budget
+        self.groups = len(problem.groups)
+        self._memo: dict[bytes, tuple[np.ndarray, np.ndarray | None]] = {}
+        self._failed_residual = np.full(problem.n_points, 1e3 * (1.0 + np.max(problem.measured_n)))
+
+    def point(self, unit: np.ndarray) -> np.ndarray:
+        """Parameters of unit coordinates, strictly within the declared bounds."""
+        space = self.problem.space
+        theta = space.from_unit(np.clip(unit, 0.0, 1.0)[None, :])[0]
+        # exp∘log may round a bound one ulp past itself
+        return np.clip(theta, [p.low for p in space], [p.high for p in space])
+
+    def _at(self, unit: np.ndarray) -> tuple[np.ndarray, list[int]]:
+        """The runs of one evaluation: the point at every condition group."""
+        return np.repeat(self.point(unit)[None, :], self.groups, axis=0), list(range(self.groups))
+
+    def keys(self, unit: np.ndarray) -> list[str]:
+        """Result-cache keys of the runs at ``unit`` (one per condition group)."""
+        return self.runs.keys(*self._at(unit))
+
+    def evaluate(self, unit: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Residual (n,) and curves (G, A) at ``unit``; curves None where the solver failed
+        (then the residual is a large constant, so a trust-region step there is rejected)."""
+        key = np.round(unit, 12).tobytes()
+        if key not in self._memo:
+            thetas, groups = self._at(unit)
+            if (
+                self.budget is not None
+                and self.runs.calls + self.runs.cost(thetas, groups) > self.budget
+            ):
+                raise BudgetSpent(f"{self.runs.calls} of {self.budget} solver runs used")
+            out = self.runs.run(thetas, groups)
+            if any(o is None for o in out):
+                self._memo[key] = (self._failed_residual, None)
+            else:
+                curves = np.array([o["curve"] for o in out])
+                self._memo[key] = (self.problem.residuals(curves), curves)
+        return self._memo[key]
+
+    def residual(self, unit: np.ndarray) -> np.ndarray:
+        return self.evaluate(unit)[0]
+
+    def jacobian(self, unit: np.ndarray) -> np.ndarray:
+        """Forward differences of ``FD_STEP_UNIT`` in unit coordinates (inwards at a bound);
+        a column whose shifted run failed is zero."""
+        residual = self.residual(unit)
+        jac = np.empty((residual.size, unit.size))
+        for j in range(unit.size):
+            step = FD_STEP_UNIT if unit[j] + FD_STEP_UNIT <= 1.0 else -FD_STEP_UNIT
+            shifted = unit.copy()
+            shifted[j] += step
+            shifted_residual, curves = self.evaluate(shifted)
+            jac[:, j] = 0.0 if curves is None else (shifted_residual - residual) / step
+        return jac
+
+    def best_evaluated(self) -> np.ndarray | None:
+        """The unit point of lowest RSS among those evaluated (failures excluded)."""
+        done = [(float(r @ r), k) for k, (r, c) in self._memo.items() if c is not None]
+        return np.frombuffer(min(done)[1]).copy() if done else None
+
+
+class _BroydenJacobian:
+    """``jac`` for ``least_squares``: finite differences every ``refresh``-th call,
+    Broyden's rank-one update of the last Jacobian in between."""
+
+    def __init__(self, model: ResidualModel, refresh: int) -> None:
+        self.model, self.refresh = model, refresh
+        self.calls = 0
+        self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def __call__(self, unit: np.ndarray) -> np.ndarray:
+        residual = self.model.residual(unit)
+        step = np.zeros_like(unit) if self._last is None else unit - self._last[0]
+        if self._last is None or self.calls % self.refresh == 0 or not np.any(step):
+            jac = self.model.jacobian(unit)
+        else:
+            _, previous_residual, previous_jac = self._last
+            change = residual - previous_residual
+            jac = previous_jac + np.outer(change - previous_jac @ step, step) / (step @ step)
+        self.calls += 1
+        self._last = (unit.copy(), residual, jac)
+        return jac
+
+
+@dataclass(frozen=True)
+class LocalFit:
+    """Result of :func:`local_fit` (``theta`` in the declared units).
+
+    ``jacobian`` is the finite-difference ``∂r/∂u`` at ``unit``; ``at_bound``
+    −1/+1 where a parameter sits at its lower/upper bound (0 inside; also what
+    ``least_squares`` reported as an active bound);
+    ``predicted_gain`` the relative RMSE decrease the Gauss–Newton model still
+    promises within ``±FIRST_ORDER_BOX`` (the first-order test: ``converged``
+    iff it is at most ``FIRST_ORDER_GAIN``); ``message`` says which.
+    """
+
+    theta: np.ndarray
+    unit: np.ndarray
+    residual: np.ndarray
+    curves: np.ndarray
+    jacobian: np.ndarray
+    at_bound: np.ndarray
+    predicted_gain: float
+    converged: bool
+    message: str
+
+    @property
+    def rmse(self) -> float:
+        return float(np.sqrt(np.mean(self.residual**2)))
+
+
+def local_fit(
+    model: ResidualModel,
+    theta: np.ndarray,
+    *,
+    ftol: float = 1e-6,
+    xtol: float = 1e-6,
+    max_evaluations: int = 60,
+    jacobian_refresh: int = 3,
+    rounds: int = _ROUNDS,
+) -> LocalFit:
+    """Bounded trust-region least squares (``scipy.optimize.least_squares``, trf) from ``theta``.
+
+    Repeats (at most ``rounds`` times, from where it stopped) until the
+    first-order test holds; stops early, unconverged, when the budget of
+    ``model`` is spent. Raises :class:`SolverFailed` if the solver fails at
+    ``theta`` itself.
+    """
+    unit = np.clip(model.problem.space.to_unit(theta[None, :])[0], 0.0, 1.0)
+    if model.evaluate(unit)[1] is None:
+        raise SolverFailed(model.runs.failures[-1] if model.runs.failures else "solver failed")
+    reason = "not started"
+    active = np.zeros(unit.size, dtype=int)
+    try:
+        for _ in range(rounds):
+            found = least_squares(
+                model.residual,
+                unit,
+                jac=_BroydenJacobian(model, jacobian_refresh),
+                bounds=(0.0, 1.0),
+                method="trf",
+                ftol=ftol,
+                xtol=xtol,
+                gtol=1e-8,  # the first-order test below decides, in RMSE terms
+                max_nfev=max_evaluations,
+            )
+            unit, active = found.x, found.active_mask
+            gain = first_order_gain(model.residual(unit), model.jacobian(unit), unit)
+            if gain <= FIRST_ORDER_GAIN:
+                break
+            reason = f"the Gauss–Newton model still promises {100 * gain:.2g} % lower RMSE"
+    except BudgetSpent as spent:
+        unit = model.best_evaluated()  # type: ignore[assignment]
+        reason = f"budget spent ({spent})"
+    return _result(model, unit, reason, active)
+
+
+def _result(model: ResidualModel, unit: np.ndarray, reason: str, active: np.ndarray) -> LocalFit:
+    residual, curves = model.evaluate(unit)
+    try:
+        jac = model.jacobian(unit)
+    except BudgetSpent:
+        jac = np.full((residual.size, unit.size), np.nan)
+    gain = first_order_gain(residual, jac, unit) if np.all(np.isfinite(jac)) else math.inf
+    converged = gain <= FIRST_ORDER_GAIN
+    message = (
+        f"local optimum: within ±{100 * FIRST_ORDER_BOX:g} % of each range the Gauss–Newton "
+        f"model promises at most {100 * gain:.2g} % lower RMSE"
+        if converged
+        else f"not at a verified local optimum: {reason}"
+    )
+    return LocalFit(
+        theta=model.point(unit),
+        unit=unit,
+        residual=residual,
+        curves=curves,  # type: ignore[arg-type]
+        jacobian=jac,
+        # within a hair of a bound (trf keeps its iterates strictly inside), or what
+        # least_squares itself reports as an active bound
+        at_bound=np.where(
+            unit <= AT_BOUND_UNIT, -1, np.where(unit >= 1 - AT_BOUND_UNIT, 1, active)
+        ),
+        predicted_gain=float(gain),
+        converged=converged,
+        message=message,
+    )
+
+
+def first_order_gain(residual: np.ndarray, jac: np.ndarray, unit: np.ndarray) -> float:
+    """Relative RMSE decrease the Gauss–Newton model promises within ``±FIRST_ORDER_BOX``
+    of ``unit`` (and inside the unit cube): ``1 − min‖r + J s‖ / ‖r‖``."""
+    low = np.maximum(-FIRST_ORDER_BOX, -unit)
+    high = np.minimum(FIRST_ORDER_BOX, 1.0 - unit)
+    high = np.maximum(high, low + 1e-15)  # lsq_linear needs low < high at a bound
+    step = lsq_linear(jac, -residual, bounds=(low, high), method="bvls").x
+    now = float(np.linalg.norm(residual))
+    return max(0.0, 1.0 - float(np.linalg.norm(residual + jac @ step)) / now) if now else 0.0
