@@ -270,12 +270,27 @@ def _calibrate(args: argparse.Namespace) -> int:
         _print_json(result.to_json())
         return 0
     print(result.message)
-    print("parameters: " + ", ".join(f"{k} = {v:.4g}" for k, v in result.params.items()))
+    print(
+        "parameters (95 % interval): "
+        + ", ".join(
+            f"{k} = {v:.4g}{_interval(result.determination, k)}" for k, v in result.params.items()
+        )
+    )
     print(
         "RMSE per test [N]: " + ", ".join(f"{k} {v:.3g}" for k, v in result.rmse_per_test_n.items())
     )
     print(f"study {result.study!r} in {result.storage}")
     return 0
+
+
+def _interval(determination: dict[str, Any] | None, name: str) -> str:
+    """`` [low, high]`` of a calibrated parameter, or what stands in for it."""
+    if determination is None:
+        return ""
+    if name in determination["held_at_bound"]:
+        return " (held at its bound)"
+    low, high = determination["intervals"][name]
+    return f" [{low:.4g}, {high:.4g}]" + (" free" if name in determination["free"] else "")
 
 
 def _parse_params(text: str | None) -> dict[str, float] | None:

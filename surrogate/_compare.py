@@ -29,6 +29,7 @@ from ._calibrate import (
     CalibrationProblem,
     _load,
     _Runs,
+    calibration_note,
     calibration_study_name,
     model_label,
 )
@@ -49,6 +50,9 @@ class CompareResult:
     (bias) [N]; ``bands``: RMSE per angle band; ``covariates``: for each
     condition or covariate that varies between tests, the correlation of the
     tests' mean residual with it; ``plots``: the PNG files written.
+    ``calibration``: for the stored calibration (no ``params`` given), its
+    ``status``, ``misfit`` and ``determination`` (see :class:`CalibrationResult`);
+    ``None`` for given parameters.
     """
 
     params: dict[str, float]
@@ -60,6 +64,7 @@ class CompareResult:
     bands: list[dict[str, Any]]
     covariates: dict[str, float]
     plots: list[str]
+    calibration: dict[str, Any] | None
     study: str
     message: str
 
@@ -105,7 +110,8 @@ def compare(
     problem = CalibrationProblem(spec, data, chosen)
     url = storage or spec.default_storage()
     name = calibration_study_name(spec, chosen)
-    theta = _parameters(problem, params, url, name)
+    stored = None if params is not None else latest_calibration(url, name)
+    theta = _parameters(problem, params if stored is None else stored["params"], url, name)
     runs = _Runs(problem, spec.directory / ".solver-cache", jobs=1)
     G = len(problem.groups)
     out = runs.run(np.repeat(theta[None, :], G, axis=0), list(range(G)))
@@ -139,6 +145,7 @@ def compare(
         f"{model_label(chosen)}: RMSE {rmse:.4g} N = {rmse / noise:.2f}× noise ({noise:.3g} N); "
         f"worst test {worst['test_id']} ({worst['rmse_n']:.3g} N); "
         + ", ".join(f"{b['band']} {b['rmse_n']:.3g} N" for b in bands)
+        + _calibration_summary(stored)
     )
     result = CompareResult(
         params=dict(zip(problem.space.names, map(float, theta), strict=True)),
@@ -150,13 +157,28 @@ def compare(
         bands=bands,
         covariates=covariates,
         plots=files,
+        calibration=None
+        if stored is None
+        else {k: stored.get(k) for k in ("status", "misfit", "misfit_p_value", "determination")},
         study=name,
         message=message,
     )
-    _attach(url, name, problem, curves, residual, tests, result)
+    _attach(url, name, problem, curves, residual, tests, result, stored)
     if progress:
         print(f"[{name}] {message}", file=sys.stderr, flush=True)
     return result
+
+
+def _calibration_summary(stored: Mapping[str, Any] | None) -> str:
+    """What the stored calibration claims: its status, misfit and what the curves determine."""
+    if stored is None:
+        return ""
+    if stored.get("status") != "converged" or not stored.get("determination"):
+        return f"; calibration {stored.get('status')}: not at a verified local optimum"
+    return (
+        f"; calibration converged, {stored['misfit']} (p = {stored['misfit_p_value']:.2g}); "
+        f"{stored['determination']['statement']}"
+    )
 
 
 def _parameters(
@@ -164,13 +186,10 @@ def _parameters(
 ) -> np.ndarray:
     names = problem.space.names
     if params is None:
-        stored = latest_calibration(url, name)
-        if stored is None:
-            raise InputDataError(
-                f"no calibration of model {name!r} in {url}; run `surrogate calibrate` "
-                "first or give --params"
-            )
-        params = stored["params"]
+        raise InputDataError(
+            f"no calibration of model {name!r} in {url}; run `surrogate calibrate` "
+            "first or give --params"
+        )
     unknown = [k for k in params if k not in names]
     missing = [k for k in names if k not in params]
     if unknown or missing:
@@ -347,8 +366,10 @@ def _attach(
     residual: np.ndarray,
     tests: list[dict[str, Any]],
     result: CompareResult,
+    stored: Mapping[str, Any] | None,
 ) -> None:
-    """The same figures as plotly objects on the calibration study (optuna-dashboard)."""
+    """The same figures as plotly objects on the calibration study (optuna-dashboard);
+    the note keeps the calibration's own statement above the comparison."""
     try:
         import plotly.graph_objects as go
         from optuna_dashboard import save_note, save_plotly_graph_object
@@ -427,4 +448,6 @@ def _attach(
         "|---|---|---|",
         *[f"| {b['band']} | {b['rmse_n']:.4g} | {b['points']} |" for b in result.bands],
     ]
+    if stored is not None:
+        lines = [*calibration_note(stored), "", *lines]
     save_note(study, "\n".join(lines))

@@ -186,7 +186,8 @@ def _combination(
     t: float,
 ) -> dict[str, float]:
     def log_value(zz: np.ndarray) -> float:
-        theta = np.where(log, np.exp(zz), zz)
+        theta = zz.copy()
+        theta[log] = np.exp(zz[log])
         return math.log(function(dict(zip(names, map(float, theta), strict=True))))
 
     step = 1e-6

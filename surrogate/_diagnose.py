@@ -54,6 +54,7 @@ from ._calibrate import (
     _load,
     _Runs,
     calibrate,
+    calibration_note,
     calibration_study_name,
     model_label,
 )
@@ -223,13 +224,16 @@ def diagnose(
         solver_calls=solver_calls + len(used),
         ladder=model_ladder(url, spec.name),
     )
-    _attach_ladder(url, calibration_study_name(spec, chosen), result)
+    _attach_ladder(url, calibration_study_name(spec, chosen), result, fitted.to_json())
     say(verdict)
     return result
 
 
-def _attach_ladder(url: str, name: str, result: DiagnosisResult) -> None:
-    """The ladder and the verdict on the calibration study, for optuna-dashboard."""
+def _attach_ladder(
+    url: str, name: str, result: DiagnosisResult, calibration: dict[str, Any]
+) -> None:
+    """The ladder and the verdict on the calibration study, for optuna-dashboard (below
+    the calibration's own statement)."""
     try:
         import plotly.graph_objects as go
         from optuna_dashboard import save_note, save_plotly_graph_object
@@ -263,6 +267,8 @@ def _attach_ladder(url: str, name: str, result: DiagnosisResult) -> None:
                 "| added effect | RMSE [N] | held-out RMSE [N] | ΔBIC |",
                 "|---|---|---|---|",
                 *rows,
+                "",
+                *calibration_note(calibration),
             ]
         ),
     )

@@ -8,6 +8,7 @@ the product only ever sees the CSV files this writes.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -17,7 +18,13 @@ from ._conditions import CONDITIONS
 from ._rig import Rig
 from ._simulate import simulate
 
-__all__ = ["HIDDEN_EFFECT_TESTS", "hidden_effect_tests", "synthetic_measurements"]
+__all__ = [
+    "HIDDEN_EFFECT_TESTS",
+    "calibration_sets",
+    "hidden_effect_tests",
+    "synthetic_measurements",
+    "write_calibration_study",
+]
 
 
 def synthetic_measurements(
@@ -97,3 +104,110 @@ def hidden_effect_tests(seed: int, tests: Sequence[Mapping[str, Any]] = HIDDEN_E
         }
         for test in tests
     ]
+
+
+# -- calibration data sets (tests/test_calibrate_sweep.py and benchmarks/calibration.py) ---------
+# Four tests at 0 and 20 N end tension (two replicates each, so the noise is estimated),
+# 91 angles; the tension sets add 40 N.
+BASE_TESTS = (
+    {"test_id": "a1", "tension_n": 0.0},
+    {"test_id": "a2", "tension_n": 0.0},
+    {"test_id": "b1", "tension_n": 20.0},
+    {"test_id": "b2", "tension_n": 20.0},
+)
+TENSION_TESTS = (*BASE_TESTS, {"test_id": "c1", "tension_n": 40.0})
+# coatings inside the paper's ranges, two of them near corners of the space
+CALIBRATION_COATINGS = {
+    "mid": {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02},
+    "thin-soft": {"ecoat_gpa": 0.6, "scoat_gpa": 0.06, "tcoat_mm": 0.012},
+    "thick-stiff": {"ecoat_gpa": 3.5, "scoat_gpa": 0.35, "tcoat_mm": 0.09},
+    "early-yield": {"ecoat_gpa": 3.0, "scoat_gpa": 0.07, "tcoat_mm": 0.05},
+}
+
+
+def calibration_sets() -> list[dict[str, Any]]:
+    """The calibration benchmark's data sets, each a mapping with ``name``,
+    ``coating``, ``hidden`` (effects of the truth), ``effects`` (the model's),
+    ``tests``, ``noise_n`` and ``seed`` (of the noise).
+
+    Every coating at noise seeds 1–3 (noise 0.02 N at seed 1, 0.05 N at 2 and 3);
+    the ``tension`` effect (two sets); ``tension`` + ``hardening`` (six free
+    parameters, two sets); and two *misspecified* sets (the base model on data
+    with a hidden tension effect) that must end ``converged`` with a systematic
+    misfit.
+    """
+    tension = {"tension": {"k_e": 0.006, "k_s": 0.004}}
+    both = {**tension, "hardening": {"ratio": 0.05}}
+    mid = CALIBRATION_COATINGS["mid"]
+    sets = [
+        _set(f"{label}-s{seed}", coating, {}, [], BASE_TESTS, 0.02 if seed == 1 else 0.05, seed)
+        for label, coating in CALIBRATION_COATINGS.items()
+        for seed in (1, 2, 3)
+    ]
+    sets += [
+        _set(f"tension-s{seed}", mid, tension, ["tension"], TENSION_TESTS, 0.05, seed)
+        for seed in (1, 2)
+    ]
+    sets += [
+        _set(
+            f"tension+hardening-s{seed}",
+            mid,
+            both,
+            ["hardening", "tension"],
+            TENSION_TESTS,
+            0.05,
+            seed,
+        )
+        for seed in (1, 2)
+    ]
+    sets += [
+        _set(f"misspecified-s{seed}", mid, tension, [], TENSION_TESTS, 0.05, seed)
+        for seed in (1, 2)
+    ]
+    return sets
+
+
+def _set(
+    name: str,
+    coating: Mapping[str, float],
+    hidden: Mapping[str, Mapping[str, float]],
+    effects: Sequence[str],
+    tests: Sequence[Mapping[str, Any]],
+    noise_n: float,
+    seed: int,
+) -> dict[str, Any]:
+    return {
+        "name": name,
+        "coating": dict(coating),
+        "hidden": hidden,
+        "effects": list(effects),
+        "tests": [dict(t) for t in tests],
+        "noise_n": noise_n,
+        "seed": seed,
+    }
+
+
+def write_calibration_study(folder: Path, case: Mapping[str, Any], *, seed: int = 0) -> Path:
+    """``tests.csv`` (the case's synthetic data) and ``study.toml`` (the paper's ranges,
+    the case's effects, study seed ``seed``) in ``folder``; returns the study path."""
+    folder.mkdir(parents=True, exist_ok=True)
+    synthetic_measurements(
+        case["tests"],
+        coating=case["coating"],
+        effects=case["hidden"] or None,
+        noise_n=case["noise_n"],
+        seed=case["seed"],
+    ).to_csv(folder / "tests.csv", index=False)
+    listed = ", ".join(f'"{e}"' for e in case["effects"])
+    path = folder / "study.toml"
+    path.write_text(
+        f'[study]\nname = "{case["name"]}"\nseed = {seed}\n'
+        "[parameters]\n"
+        "ecoat_gpa = { low = 0.5,  high = 4.0, log = true }\n"
+        "scoat_gpa = { low = 0.05, high = 0.4, log = true }\n"
+        "tcoat_mm  = { low = 0.01, high = 0.1, log = true }\n"
+        '[measurements]\nfile = "tests.csv"\n'
+        f"[model]\neffects = [{listed}]\n"
+        "[budget]\ncalibration_solver_calls = 200\nsurrogate_trials = 100\n"
+    )
+    return path

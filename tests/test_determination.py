@@ -1,0 +1,123 @@
+"""What the curves determine (pure maths) and the local phase's first-order test, on
+linear problems whose answers are known in closed form."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from surrogate._determination import FREE_SHARE, determine
+from surrogate._local import FIRST_ORDER_BOX, first_order_gain
+
+NAMES = ("a", "b")
+
+
+def _linear_problem(seed, n=200, correlation=0.0):
+    """r = y − X z with known X; z in a linear scale on [−10, 10]."""
+    rng = np.random.default_rng(seed)
+    X = rng.standard_normal((n, 2))
+    X[:, 1] = correlation * X[:, 0] + math.sqrt(1 - correlation**2) * X[:, 1]
+    z_true = np.array([0.3, -0.2])
+    y = X @ z_true + 0.1 * rng.standard_normal(n)
+    z_hat = np.linalg.lstsq(X, y, rcond=None)[0]
+    return X, y - X @ z_hat, z_hat
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_intervals_are_the_textbook_ones_for_a_linear_model(seed):
+    X, residual, z_hat = _linear_problem(seed)
+    low, high = np.full(2, -10.0), np.full(2, 10.0)
+    span = high - low
+    found = determine(
+        NAMES,
+        low,
+        high,
+        np.array([False, False]),
+        z_hat,
+        -X * span,  # ∂r/∂u = ∂r/∂z · span
+        residual,
+        np.zeros(2, dtype=int),
+        combinations={"sum": ("exp(a + b)", lambda p: math.exp(p["a"] + p["b"]))},
+    )
+    dof = X.shape[0] - 2
+    s2 = residual @ residual / dof
+    covariance = s2 * np.linalg.inv(X.T @ X)
+    t = stats.t.ppf(0.975, dof)
+    for k, name in enumerate(NAMES):
+        half = t * math.sqrt(covariance[k, k])
+        np.testing.assert_allclose(found.intervals[name], [z_hat[k] - half, z_hat[k] + half])
+    sd_sum = math.sqrt(covariance[0, 0] + covariance[1, 1] + 2 * covariance[0, 1])
+    assert found.combinations["sum"]["relative_half_width"] == pytest.approx(
+        math.expm1(t * sd_sum), rel=1e-6
+    )
+    assert found.free == [] and found.held_at_bound == []
+    assert found.sigma_n == pytest.approx(math.sqrt(s2))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_valley_leaves_the_parameters_free_but_determines_their_combination(seed):
+    """Nearly collinear columns: a and b apart are free, a + b is determined."""
+    rng = np.random.default_rng(seed)
+    n = 300
+    x = rng.standard_normal(n)
+    X = np.column_stack([x, x + 1e-4 * rng.standard_normal(n)])
+    residual = 0.1 * rng.standard_normal(n)
+    low, high = np.full(2, -1.0), np.full(2, 1.0)
+    found = determine(
+        NAMES,
+        low,
+        high,
+        np.array([False, False]),
+        np.array([0.2, 0.1]),
+        -X * (high - low),
+        residual,
+        np.zeros(2, dtype=int),
+        combinations={"sum": ("exp(a + b)", lambda p: math.exp(p["a"] + p["b"]))},
+    )
+    assert found.free == ["a", "b"]
+    assert found.intervals["a"] == [-1.0, 1.0]  # free: the whole range, not a linearisation
+    assert found.combinations["sum"]["relative_half_width"] < 0.05
+    assert found.directions[0]["half_width"] < FREE_SHARE  # a + b, best determined first
+    assert found.directions[0]["weights"]["a"] == pytest.approx(
+        found.directions[0]["weights"]["b"], rel=1e-3
+    )
+    assert "a, b apart are free" in found.statement
+
+
+def test_a_parameter_at_its_bound_is_held_and_said_so():
+    X, residual, z_hat = _linear_problem(0)
+    found = determine(
+        NAMES,
+        np.array([0.01, -10.0]),
+        np.array([1.0, 10.0]),
+        np.array([True, False]),
+        np.array([0.01, z_hat[1]]),
+        -X,
+        residual,
+        np.array([-1, 0]),
+    )
+    assert found.held_at_bound == ["a"] and found.intervals["a"] is None
+    assert found.intervals["b"] is not None
+    assert "a held at its lower bound 0.01" in found.statement
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_first_order_test_is_zero_at_an_optimum_and_not_away_from_it(seed):
+    X, residual, _ = _linear_problem(seed)
+    unit = np.array([0.5, 0.5])
+    assert first_order_gain(residual, -X, unit) == pytest.approx(0.0, abs=1e-9)
+    moved = residual - X @ np.array([FIRST_ORDER_BOX, 0.0])  # r at the optimum shifted
+    assert first_order_gain(moved, -X, unit) > 1e-3
+
+
+def test_the_first_order_test_lets_a_bound_hold_a_parameter():
+    """The optimum lies beyond the upper bound of u₀: at the bound nothing is promised."""
+    rng = np.random.default_rng(0)
+    X = rng.standard_normal((100, 2))
+    y = X @ np.array([2.0, 0.3])
+    unit = np.array([1.0, 0.3])  # u₀ held at its upper bound; u₁ at its optimum given u₀
+    u1 = np.linalg.lstsq(X[:, 1:], y - X[:, 0], rcond=None)[0][0]
+    unit[1] = u1
+    residual = y - X @ unit
+    assert first_order_gain(residual, -X, unit) == pytest.approx(0.0, abs=1e-9)
