@@ -136,12 +136,13 @@ def determine(
 
     intervals: dict[str, list[float] | None] = {}
     free, held = [], []
+    position = {int(k): i for i, k in enumerate(free_index)}
     for k, name in enumerate(names):
-        if k not in free_index:
+        if k not in position:
             held.append(name)
             intervals[name] = None
             continue
-        half = t * sd_of(np.eye(p_free)[list(free_index).index(k)])
+        half = t * sd_of(np.eye(p_free)[position[k]])
         if 2 * half >= FREE_SHARE * span[k]:
             free.append(name)
             half = math.inf
@@ -155,11 +156,13 @@ def determine(
     directions = []
     for index in np.argsort(-eigenvalues):
         weights = vectors[:, index] / np.max(np.abs(vectors[:, index]))
-        half = t * sigma / math.sqrt(eigenvalues[index]) if determined[index] else None
+        width = t * sigma / math.sqrt(eigenvalues[index]) if determined[index] else None
         directions.append(
             {
-                "half_width": half,
-                "weights": {names[k]: float(w) for k, w in zip(free_index, weights, strict=True)},
+                "half_width": width,
+                "weights": {
+                    names[int(k)]: float(w) for k, w in zip(free_index, weights, strict=True)
+                },
             }
         )
     labels = {key: label for key, (label, _) in combinations.items()}
@@ -184,7 +187,7 @@ def _combination(
     free_index: np.ndarray,
     sd_of: Callable[[np.ndarray], float],
     t: float,
-) -> dict[str, float]:
+) -> dict[str, float | None]:
     def log_value(zz: np.ndarray) -> float:
         theta = zz.copy()
         theta[log] = np.exp(zz[log])

@@ -150,7 +150,7 @@ def calibration_sets() -> list[dict[str, Any]]:
     ]
     sets += [
         _set(
-            f"tension+hardening-s{seed}",
+            f"tension-hardening-s{seed}",
             mid,
             both,
             ["hardening", "tension"],

@@ -8,7 +8,7 @@ import pytest
 from scipy import stats
 
 from surrogate._determination import FREE_SHARE, determine
-from surrogate._local import FIRST_ORDER_BOX, first_order_gain
+from surrogate._local import FIRST_ORDER_BOX, gauss_newton_step
 
 NAMES = ("a", "b")
 
@@ -106,9 +106,9 @@ def test_a_parameter_at_its_bound_is_held_and_said_so():
 def test_the_first_order_test_is_zero_at_an_optimum_and_not_away_from_it(seed):
     X, residual, _ = _linear_problem(seed)
     unit = np.array([0.5, 0.5])
-    assert first_order_gain(residual, -X, unit) == pytest.approx(0.0, abs=1e-9)
+    assert gauss_newton_step(residual, -X, unit)[1] == pytest.approx(0.0, abs=1e-9)
     moved = residual - X @ np.array([FIRST_ORDER_BOX, 0.0])  # r at the optimum shifted
-    assert first_order_gain(moved, -X, unit) > 1e-3
+    assert gauss_newton_step(moved, -X, unit)[1] > 1e-3
 
 
 def test_the_first_order_test_lets_a_bound_hold_a_parameter():
@@ -120,4 +120,4 @@ def test_the_first_order_test_lets_a_bound_hold_a_parameter():
     u1 = np.linalg.lstsq(X[:, 1:], y - X[:, 0], rcond=None)[0][0]
     unit[1] = u1
     residual = y - X @ unit
-    assert first_order_gain(residual, -X, unit) == pytest.approx(0.0, abs=1e-9)
+    assert gauss_newton_step(residual, -X, unit)[1] == pytest.approx(0.0, abs=1e-9)
