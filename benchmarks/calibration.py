@@ -92,15 +92,19 @@ def calibrate_case(task: tuple[dict[str, Any], int]) -> dict[str, Any]:
         "misfit": result.misfit,
         "d_covered": None,
         "mp_covered": None,
+        "d_half_width": None,
+        "mp_half_width": None,
+        "params": result.params,
     }
     if result.determination is not None:
         combos = result.determination["combinations"]
         for key, truth_value, label in (
-            ("bending_stiffness_nmm", d0, "d_covered"),
-            ("plastic_moment_n", mp0, "mp_covered"),
+            ("bending_stiffness_nmm", d0, "d"),
+            ("plastic_moment_n", mp0, "mp"),
         ):
             low, high = combos[key]["low"], combos[key]["high"]
-            row[label] = low is not None and low <= truth_value <= high
+            row[f"{label}_covered"] = low is not None and low <= truth_value <= high
+            row[f"{label}_half_width"] = combos[key]["relative_half_width"]
     row["at_floor"] = (
         row["rmse_over_truth"] <= NOISE_FLOOR
         and abs(row["d_error"]) <= COMBINATION_RTOL

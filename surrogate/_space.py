@@ -52,19 +52,24 @@ class ParameterSpec:
         object.__setattr__(self, "low", low)
         object.__setattr__(self, "high", high)
 
+    @property
+    def span(self) -> float:
+        """The range in the sampled scale: ``log(high/low)`` if log-scaled, else ``high − low``."""
+        return float(np.log(self.high) - np.log(self.low)) if self.log else self.high - self.low
+
     def to_unit(self, values: np.ndarray) -> np.ndarray:
         """Map values in ``[low, high]`` to ``[0, 1]`` (log-scaled if declared)."""
         values = np.asarray(values, dtype=float)
         if self.log:
-            return (np.log(values) - np.log(self.low)) / (np.log(self.high) - np.log(self.low))
-        return (values - self.low) / (self.high - self.low)
+            return (np.log(values) - np.log(self.low)) / self.span
+        return (values - self.low) / self.span
 
     def from_unit(self, unit: np.ndarray) -> np.ndarray:
         """Inverse of :meth:`to_unit`."""
         unit = np.asarray(unit, dtype=float)
         if self.log:
-            return np.exp(np.log(self.low) + unit * (np.log(self.high) - np.log(self.low)))
-        return self.low + unit * (self.high - self.low)
+            return np.exp(np.log(self.low) + unit * self.span)
+        return self.low + unit * self.span
 
     def contains(self, values: np.ndarray, *, rtol: float = 1e-9) -> np.ndarray:
         span = self.high - self.low
