@@ -809,7 +809,7 @@ class _Loop:
                 "rmse": fit.rmse,
                 "per_test": self.problem.rmse_per_test(fit.curves),
                 "predicted": None,
-                "keys": residuals.keys(fit.unit),
+                "keys": residuals.keys(fit.theta),
                 "curves": fit.curves,
                 "calls": self.runs.calls,
                 "phase": "local",
