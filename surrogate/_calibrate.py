@@ -672,9 +672,10 @@ class _Loop:
     2. *Local*: :func:`~surrogate._local.local_fit` from the best verified point,
        until the first-order test holds at a verified point.
     3. *Other basins*: the surrogate, refitted on every run so far, is searched
-       again; where it predicts a fit better than the best local optimum outside
-       that optimum's first-order box, the point is verified and, if it is better,
-       fitted locally too (at most ``BASIN_CHECKS`` searches).
+       again; where it predicts a fit better than the best local optimum (however
+       near: a second optimum can lie within 5 % of a range behind a barrier), the
+       point is verified and, if it is better, fitted locally too (at most
+       ``BASIN_CHECKS`` local fits).
     """
 
     def __init__(
@@ -828,12 +829,10 @@ class _Loop:
         self.iterations += 1
         self._fit(model)
         candidate, predicted = self._search(model, surrogate_trials)
-        unit = self.problem.space.to_unit(candidate[None, :])[0]
-        near = any(np.max(np.abs(unit - f.unit)) <= FIRST_ORDER_BOX for f in self.fits)
-        if near or predicted >= (1.0 - SETTLED) * best.rmse:
+        if predicted >= (1.0 - SETTLED) * best.rmse:
             self._say(
-                f"no other basin: the surrogate's best ({predicted:.4g} N) is "
-                + ("at a local optimum" if near else f"no better than {best.rmse:.4g} N")
+                f"no other basin: the surrogate's best ({predicted:.4g} N) is no better "
+                f"than the local optimum's {best.rmse:.4g} N"
             )
             return None
         verified = self._verify(candidate, predicted)

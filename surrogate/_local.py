@@ -53,6 +53,7 @@ __all__ = [
 ]
 
 FD_STEP_UNIT = 1e-3  # 0.1 % of a range: far above the solver's 1e-9 Newton tolerance
+ROUGH_CHI2 = 1.0  # a promise the solver does not deliver, and under one unit of χ²: resolved
 MIN_FD_STEP_UNIT = 1e-6  # the smallest it shrinks to where a Jacobian was not trusted
 BACKTRACK = (1.0, 1 / 4, 1 / 16, 1 / 64)  # fractions of a Gauss–Newton step the test tries
 FIRST_ORDER_BOX = 0.05  # the first-order test looks ±5 % of each range around the point
@@ -128,18 +129,10 @@ class FitCoordinates:
             x[i] = (np.log(value) - low) / (high - low)
         return x
 
-    def unit_jacobian(self, jac_x: np.ndarray, unit: np.ndarray) -> np.ndarray:
-        """``∂r/∂u = ∂r/∂x · ∂x/∂u`` (``∂x/∂u`` by central differences of smooth algebra)."""
-        if not self.coating:
-            return jac_x
-        step = 1e-6
-        dx_du = np.column_stack(
-            [
-                (self.from_unit(unit + step * e) - self.from_unit(unit - step * e)) / (2 * step)
-                for e in np.eye(unit.size)
-            ]
-        )
-        return jac_x @ dx_du
+    def canonical(self, x: np.ndarray) -> np.ndarray:
+        """``x`` moved onto the points that stand for themselves: where Ecoat (Scoat) is
+        held at its bound, the log D (log Mp) coordinate that holds it exactly there."""
+        return np.clip(self.from_unit(self.to_unit(x)), 0.0, 1.0)
 
 
 class ResidualModel:
@@ -204,15 +197,27 @@ class ResidualModel:
         return self.evaluate(x)[0]
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
-        """Forward differences of ``fd_step`` in fit coordinates (inwards at a bound);
-        a column whose shifted run failed is zero."""
-        residual = self.residual(x)
-        jac = np.empty((residual.size, x.size))
-        for j in range(x.size):
-            step = self.fd_step if x[j] + self.fd_step <= 1.0 else -self.fd_step
-            shifted = x.copy()
+        """``∂r/∂x``: forward differences of ``fd_step`` in fit coordinates (inwards at a
+        bound, also where Ecoat or Scoat is held at theirs); a column whose shifted run
+        failed is zero."""
+        return self._differences(x, lambda shifted: shifted)
+
+    def unit_jacobian(self, unit: np.ndarray) -> np.ndarray:
+        """``∂r/∂u`` in the declared unit coordinates, by the same differences (the first-order
+        test and the statistics need it where the bounds are those of the box)."""
+        return self._differences(unit, self.coordinates.from_unit)
+
+    def _differences(self, base: np.ndarray, to_x: Any) -> np.ndarray:
+        residual = self.residual(to_x(base))
+        jac = np.empty((residual.size, base.size))
+        for j in range(base.size):
+            step = self.fd_step if base[j] + self.fd_step <= 1.0 else -self.fd_step
+            shifted = base.copy()
             shifted[j] += step
-            shifted_residual, curves = self.evaluate(shifted)
+            if np.array_equal(self.point(to_x(shifted)), self.point(to_x(base))):
+                shifted[j] = base[j] - step  # a bound held in the other coordinates: go inwards
+                step = -step
+            shifted_residual, curves = self.evaluate(to_x(shifted))
             jac[:, j] = 0.0 if curves is None else (shifted_residual - residual) / step
         return jac
 
@@ -302,6 +307,7 @@ def local_fit(
     reason = "no round run"
     try:
         for _ in range(rounds):
+            x = model.coordinates.canonical(x)
             found = least_squares(
                 model.residual,
                 x,
@@ -313,7 +319,7 @@ def local_fit(
                 gtol=1e-8,  # the first-order test below decides, in RMSE terms
                 max_nfev=max_evaluations,
             )
-            x, active = found.x, found.active_mask
+            x, active = model.coordinates.canonical(found.x), found.active_mask
             test = _first_order_test(model, x)
             if test.holds:
                 return _result(model, x, active, test)
@@ -336,15 +342,23 @@ class _FirstOrderTest:
 
 def _first_order_test(model: ResidualModel, x: np.ndarray) -> _FirstOrderTest:
     """Holds when the Gauss–Newton model at ``x`` promises at most :func:`gain_tolerance`
-    within ``±FIRST_ORDER_BOX``; where it promises more, the full solver is asked at the
-    step and at ``BACKTRACK`` fractions of it: a fraction that delivers more than the
-    tolerance is a better point (the test fails); where none delivers although the linear
-    model still promises more at the smallest, the Jacobian is not trusted (the test
-    fails, and the finite-difference step shrinks); where the promise falls within the
-    tolerance before the solver delivers, it holds."""
+    within ``±FIRST_ORDER_BOX`` of each declared range (the model, its Jacobian and its
+    step in unit coordinates, whose box holds Ecoat and Scoat at their bounds too).
+
+    Where it promises more, the full solver is asked at the step and at ``BACKTRACK``
+    fractions of it: a fraction that delivers more than the tolerance is a better point
+    to go on from. Where none delivers, the Jacobian is not trusted and the
+    finite-difference step shrinks tenfold for the next round (down to
+    ``MIN_FD_STEP_UNIT``; beyond, the test fails for good: the response is rough) —
+    unless the promise is under ``ROUGH_CHI2`` units of χ²: then no point the solver
+    was asked about is better and what is left is within one standard deviation, a
+    local optimum to the solver's resolution.
+    """
+    # in the declared unit coordinates, where every bound is a bound of the box
+    coordinates = model.coordinates
     residual = model.residual(x)
-    jac = model.jacobian(x)
-    step, predicted = gauss_newton_step(residual, jac, x)
+    unit = coordinates.to_unit(x)
+    step, predicted = gauss_newton_step(residual, model.unit_jacobian(unit), unit)
     box = f"within ±{100 * FIRST_ORDER_BOX:g} % of each range"
     tolerance = gain_tolerance(residual.size, x.size)
     now = float(np.linalg.norm(residual))
@@ -352,24 +366,38 @@ def _first_order_test(model: ResidualModel, x: np.ndarray) -> _FirstOrderTest:
         text = f"local optimum: {box} the Gauss–Newton model promises ≤ {100 * predicted:.2g} %"
         return _FirstOrderTest(True, predicted, None, x, text + " lower RMSE")
     for fraction in BACKTRACK:
-        promise = 1.0 - float(np.linalg.norm(residual + fraction * (jac @ step))) / now
-        if promise <= tolerance:
-            text = (
-                f"local optimum: {box} the Gauss–Newton model promised {100 * predicted:.2g} % "
-                f"lower RMSE; the full solver gives none at that step, and at {fraction:g} of it "
-                f"the promise is within the tolerance ({100 * tolerance:.2g} %)"
-            )
-            return _FirstOrderTest(True, predicted, None, x, text)
-        target = np.clip(x + fraction * step, 0.0, 1.0)
+        target = coordinates.from_unit(np.clip(unit + fraction * step, 0.0, 1.0))
         verified = 1.0 - float(np.linalg.norm(model.residual(target))) / now
         if verified > tolerance:
             text = f"a step {box} still lowers the RMSE by {100 * verified:.2g} % (full solver)"
             return _FirstOrderTest(False, predicted, verified, target, text)
+    tried = ", ".join(f"{f:g}" for f in BACKTRACK)
+    if predicted <= gain_tolerance(residual.size, x.size, ROUGH_CHI2):
+        text = (
+            f"local optimum to the solver's resolution: {box} the Gauss–Newton model promises "
+            f"{100 * predicted:.2g} % lower RMSE (under one unit of χ²), the full solver gives "
+            f"none of it at {tried} of the step"
+        )
+        return _FirstOrderTest(True, predicted, None, x, text)
+    if model.fd_step <= MIN_FD_STEP_UNIT:
+        text = (
+            f"the Gauss–Newton model promises {100 * predicted:.2g} % lower RMSE, the full "
+            f"solver gives none at {tried} of the step even with a finite-difference step of "
+            f"{model.fd_step:g}: the solver's response is rough at this scale"
+        )
+        return _FirstOrderTest(False, predicted, None, x, text)
     model.fd_step = max(model.fd_step / 10.0, MIN_FD_STEP_UNIT)
     text = (
         f"the Gauss–Newton model promises {100 * predicted:.2g} % lower RMSE but the full solver "
-        f"gives none at {', '.join(f'{f:g}' for f in BACKTRACK)} of the step: the Jacobian is "
-        f"not trusted (finite-difference step now {model.fd_step:g})"
+        f"gives none at {tried} of the step: the Jacobian is not trusted (finite-difference "
+        f"step now {model.fd_step:g})"
+    )
+    return _FirstOrderTest(False, predicted, None, x, text)
+    model.fd_step = max(model.fd_step / 10.0, MIN_FD_STEP_UNIT)
+    text = (
+        f"the Gauss–Newton model promises {100 * predicted:.2g} % lower RMSE but the full solver "
+        f"gives none at {tried} of the step: the Jacobian is not trusted (finite-difference "
+        f"step now {model.fd_step:g})"
     )
     return _FirstOrderTest(False, predicted, None, x, text)
 
@@ -382,9 +410,9 @@ def _result(
     reason: str = "",
 ) -> LocalFit:
     residual, curves = model.evaluate(x)
-    unit = model.problem.space.to_unit(model.point(x)[None, :])[0]
+    unit = model.coordinates.to_unit(x)
     try:
-        jac = model.coordinates.unit_jacobian(model.jacobian(x), unit)
+        jac = model.unit_jacobian(unit)
     except BudgetSpent:
         jac = np.full((residual.size, x.size), np.nan)
     if model.coordinates.coating:  # trf's active bounds are in x: only where x is u
@@ -412,10 +440,9 @@ def _result(
     )
 
 
-def gain_tolerance(n_points: int, n_parameters: int) -> float:
-    """The relative RMSE decrease worth ``FIRST_ORDER_CHI2 · s²`` of RSS:
-    ``1 − sqrt(1 − FIRST_ORDER_CHI2 / (n − p))``."""
-    return 1.0 - math.sqrt(1.0 - min(FIRST_ORDER_CHI2 / max(n_points - n_parameters, 1), 1.0))
+def gain_tolerance(n_points: int, n_parameters: int, chi2: float = FIRST_ORDER_CHI2) -> float:
+    """The relative RMSE decrease worth ``chi2 · s²`` of RSS: ``1 − sqrt(1 − chi2/(n − p))``."""
+    return 1.0 - math.sqrt(1.0 - min(chi2 / max(n_points - n_parameters, 1), 1.0))
 
 
 def gauss_newton_step(
