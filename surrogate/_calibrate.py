@@ -44,7 +44,14 @@ from ._cache import ResultCache, input_hash
 from ._conditions import CONDITIONS
 from ._determination import determine
 from ._errors import InputDataError
-from ._local import FIRST_ORDER_BOX, LocalFit, ResidualModel, SolverFailed, local_fit
+from ._local import (
+    FIRST_ORDER_BOX,
+    BudgetSpent,
+    LocalFit,
+    ResidualModel,
+    SolverFailed,
+    local_fit,
+)
 from ._measurements import MeasurementSet, load_measurements
 from ._simulate import model_state_of
 from ._space import ParameterSpace, ParameterSpec
@@ -393,14 +400,15 @@ class CalibrationResult:
     at ``params`` (a verified point; see :mod:`surrogate._local`), else
     ``budget_exhausted`` (``params`` is then the best verified point).
     ``predicted_gain`` is what that test measured: the relative RMSE decrease the
-    Gauss–Newton model still promises within ±5 % of each range. With
+    Gauss–Newton model still promises within ±5 % of each range (``None`` unless
+    ``converged``). With
     ``converged``: ``misfit`` is ``"within the noise"`` or ``"systematic"`` by the
     F-test of the RSS against the noise (``misfit_p_value``; systematic below
     0.01), and ``determination`` says what the curves determine (the keys of
     :class:`~surrogate._determination.Determination`: 95 % intervals of the
-    bending stiffness ``bending_stiffness_nmm`` [N·mm/mm], the plastic moment
-    ``plastic_moment_n`` [N·mm/mm] and each parameter, the free parameters, those
-    held at a bound). Both are ``None`` unless ``converged``.
+    bending stiffness ``bending_stiffness_nmm`` [N·mm per unit width], the plastic
+    moment ``plastic_moment_n`` [N·mm/mm = N] and each parameter, the free
+    parameters, those held at a bound). Both are ``None`` unless ``converged``.
     """
 
     params: dict[str, float]
@@ -410,7 +418,7 @@ class CalibrationResult:
     effects: list[str]
     rmse_per_test_n: dict[str, float]
     status: str
-    predicted_gain: float
+    predicted_gain: float | None
     misfit: str | None
     misfit_p_value: float | None
     determination: dict[str, Any] | None
@@ -597,7 +605,7 @@ def calibrate(
         effects=list(chosen),
         rmse_per_test_n=best["per_test"],
         status=status,
-        predicted_gain=fit.predicted_gain if fit is not None else float("inf"),
+        predicted_gain=fit.predicted_gain if converged else None,
         misfit=misfit,
         misfit_p_value=p_value,
         determination=determination,
@@ -647,7 +655,9 @@ def _message(problem: CalibrationProblem, result: CalibrationResult, fit: LocalF
         f"{result.solver_calls} solver calls, {result.status}"
     )
     if result.status != "converged":
-        why = fit.message if fit is not None else "the local phase did not run"
+        reported = np.array(list(result.params.values()))
+        reported_is_fit = fit is not None and np.array_equal(fit.theta, reported)
+        why = fit.message if reported_is_fit else "no local fit ended at the best verified point"
         return f"{text} ({why}; best verified point so far — raise --budget)"
     assert result.determination is not None
     return (
@@ -712,12 +722,16 @@ class _Loop:
         self._global(model, surrogate_trials)
         start = self.best()
         residuals = ResidualModel(self.problem, self.runs, budget=self.budget)
-        for _ in range(BASIN_CHECKS):
+        for check in range(BASIN_CHECKS):
             if start is None:
                 break
             self._local(residuals, start)
-            start = self._other_basin(model, surrogate_trials)
+            # a better point found on the last pass would be left unfitted: none is sought
+            start = self._other_basin(model, surrogate_trials) if check + 1 < BASIN_CHECKS else None
+        G = len(self.problem.groups)
         for theta in self._valley_starts():
+            if self.runs.calls + G > self.budget:
+                break
             record = self._verify(theta, None)
             if record is not None:
                 self._local(residuals, record)
@@ -800,8 +814,8 @@ class _Loop:
         self._say(f"local phase from the verified point at RMSE {start['rmse']:.4g} N")
         try:
             fit = local_fit(residuals, start["theta"])
-        except SolverFailed as failed:
-            self._say(f"local phase not started: the solver failed at the start ({failed})")
+        except (SolverFailed, BudgetSpent) as failed:
+            self._say(f"local phase not started: {failed}")
             return
         self.fits.append(fit)
         self.verified.append(
@@ -936,6 +950,7 @@ def _record(
         space = problem.space
         inside = np.clip(item["theta"], [p.low for p in space], [p.high for p in space])
         params = dict(zip(problem.space.names, map(float, inside), strict=True))
+        known.add(key)
         trial = optuna.trial.create_trial(
             params=params,
             distributions=distributions,

@@ -202,7 +202,7 @@ def _combination(
     )
     value = math.exp(log_value(z))
     half = t * sd_of(gradient)
-    if not math.isfinite(half):  # along a direction the curves do not determine at all
+    if not half < 700.0:  # inf, or exp would overflow: a direction the curves do not determine
         return {"value": value, "low": None, "high": None, "relative_half_width": None}
     return {
         "value": value,
