@@ -67,6 +67,7 @@ __all__ = [
     "CurveSurrogate",
     "calibrate",
     "calibration_study_name",
+    "coat_section",
     "model_label",
 ]
 
@@ -620,16 +621,26 @@ def calibrate(
     return result
 
 
+def coat_section(params: Mapping[str, float], thickness_mm: float) -> tuple[float, float]:
+    """Bending stiffness D [N·mm] and plastic moment Mp [N] per unit width of a coating
+    given in the paper's units (``ecoat_gpa``, ``scoat_gpa``, ``tcoat_mm``)."""
+    tcoat = params["tcoat_mm"]
+    return (
+        bending_stiffness(gpa_to_mpa(params["ecoat_gpa"]), tcoat, thickness_mm),
+        plastic_moment(gpa_to_mpa(params["scoat_gpa"]), tcoat, thickness_mm),
+    )
+
+
 def _determination(problem: CalibrationProblem, fit: LocalFit) -> Any:
     """What the curves determine at a converged local fit (bending stiffness, plastic
     moment per unit width, every parameter)."""
     space, thickness = problem.space, problem.spec.rig.thickness_mm
 
     def stiffness(p: Mapping[str, float]) -> float:
-        return bending_stiffness(gpa_to_mpa(p["ecoat_gpa"]), p["tcoat_mm"], thickness)
+        return coat_section(p, thickness)[0]
 
     def moment(p: Mapping[str, float]) -> float:
-        return plastic_moment(gpa_to_mpa(p["scoat_gpa"]), p["tcoat_mm"], thickness)
+        return coat_section(p, thickness)[1]
 
     return determine(
         space.names,

@@ -17,19 +17,15 @@ import pandas as pd
 import pytest
 
 import surrogate
+from surrogate import Rig
+from surrogate._calibrate import coat_section
 from surrogate._synthetic import calibration_sets, write_calibration_study
-from surrogate._units import gpa_to_mpa
-from surrogate.physics import bending_stiffness, plastic_moment
 
 SETS = {case["name"]: case for case in calibration_sets()}
-THICKNESS_MM = 1.2
 
 
 def _combinations(params):
-    return (
-        bending_stiffness(gpa_to_mpa(params["ecoat_gpa"]), params["tcoat_mm"], THICKNESS_MM),
-        plastic_moment(gpa_to_mpa(params["scoat_gpa"]), params["tcoat_mm"], THICKNESS_MM),
-    )
+    return coat_section(params, Rig().thickness_mm)  # the studies use the default rig
 
 
 @pytest.mark.slow
