@@ -216,26 +216,38 @@ class ResidualModel:
         """``∂r/∂x``: forward differences of ``fd_step`` in fit coordinates (inwards at a
         bound, also where Ecoat or Scoat is held at theirs); a column whose shifted run
         failed is zero."""
-        return self._differences(x, lambda shifted: shifted)
-
-    def unit_jacobian(self, unit: np.ndarray) -> np.ndarray:
-        """``∂r/∂u`` in the declared unit coordinates, by the same differences (the first-order
-        test and the statistics need it where the bounds are those of the box)."""
-        return self._differences(unit, self.coordinates.from_unit)
-
-    def _differences(self, base: np.ndarray, to_x: Any) -> np.ndarray:
-        residual = self.residual(to_x(base))
-        jac = np.empty((residual.size, base.size))
-        for j in range(base.size):
-            step = self.fd_step if base[j] + self.fd_step <= 1.0 else -self.fd_step
-            shifted = base.copy()
+        residual = self.residual(x)
+        jac = np.empty((residual.size, x.size))
+        for j in range(x.size):
+            step = self.fd_step if x[j] + self.fd_step <= 1.0 else -self.fd_step
+            shifted = x.copy()
             shifted[j] += step
-            if np.array_equal(self.point(to_x(shifted)), self.point(to_x(base))):
-                shifted[j] = base[j] - step  # a bound held in the other coordinates: go inwards
+            if np.array_equal(self.point(shifted), self.point(x)):
+                shifted[j] = x[j] - step  # Ecoat or Scoat held at its bound: go inwards
                 step = -step
-            shifted_residual, curves = self.evaluate(to_x(shifted))
+            shifted_residual, curves = self.evaluate(shifted)
             jac[:, j] = 0.0 if curves is None else (shifted_residual - residual) / step
         return jac
+
+    def unit_jacobian(self, unit: np.ndarray) -> np.ndarray:
+        """``∂r/∂u`` in the declared unit coordinates (the first-order test and the statistics
+        need it where the bounds are those of the box): the differences taken in the fit
+        coordinates, where the valley of equally good coatings is straight, times
+        ``∂x/∂u`` (central differences of smooth algebra). Differences taken in ``u``
+        straddle that narrow valley and made a free Tcoat look determined to ±0.4 %."""
+        x = self.coordinates.from_unit(unit)
+        step = 1e-6
+        dx_du = np.column_stack(
+            [
+                (
+                    self.coordinates.from_unit(unit + step * e)
+                    - self.coordinates.from_unit(unit - step * e)
+                )
+                / (2 * step)
+                for e in np.eye(unit.size)
+            ]
+        )
+        return self.jacobian(x) @ dx_du
 
     def best_evaluated(self) -> np.ndarray | None:
         """The x point of lowest RSS among those evaluated (failures excluded), if any."""
