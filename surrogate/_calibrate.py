@@ -757,12 +757,13 @@ class _Loop:
         """Both ends of the least determined direction, when the misfit is near the noise
         but not quite within it.
 
-        Thin coats leave a valley of equally good coatings (D and Mp fixed, Tcoat
-        free); its far end can hold a second, better local optimum behind a low
-        barrier (seen: a thick stiff coat, 1.14× the truth's RMSE at Tcoat 0.0999 mm
-        against 0.09 mm). A misfit with weak evidence against the noise (F-test
-        p < ``VALLEY_P``) and within ``VALLEY_RMSE`` × noise is where such a basin
-        would show; a larger misfit is the model's, not the start's.
+        Curves leave a valley of equally good coatings (D and Mp fixed, Tcoat
+        free); a fit can stop along it short of a better point (seen before the
+        local phase moved in (log D, log Mp, Tcoat): a thick stiff coat at 1.14× the
+        truth's RMSE, Tcoat 0.0999 mm against 0.09 mm). A safeguard: a misfit with
+        weak evidence against the noise (F-test p < ``VALLEY_P``) and within
+        ``VALLEY_RMSE`` × noise is where such a point would show; a larger misfit is
+        the model's, not the start's.
         """
         fit = self.best_fit()
         G = len(self.problem.groups)
