@@ -933,7 +933,7 @@ class _Loop:
                 result_x, result_f = found.x, float(found.fun)
         theta = space.from_unit(np.clip(result_x, 0.0, 1.0)[None, :])[0]
         # exp∘log may round a bound past itself; the verification stays inside
-        return np.clip(theta, [p.low for p in space], [p.high for p in space]), result_f
+        return space.clip(theta), result_f
 
 
 def _record(
@@ -960,7 +960,7 @@ def _record(
         if key in known:
             continue
         space = problem.space
-        inside = np.clip(item["theta"], [p.low for p in space], [p.high for p in space])
+        inside = space.clip(item["theta"])
         params = dict(zip(problem.space.names, map(float, inside), strict=True))
         known.add(key)
         trial = optuna.trial.create_trial(

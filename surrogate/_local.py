@@ -180,7 +180,7 @@ class ResidualModel:
         unit = self.coordinates.to_unit(np.clip(x, 0.0, 1.0))
         theta = space.from_unit(np.clip(unit, 0.0, 1.0)[None, :])[0]
         # exp∘log may round a bound one ulp past itself
-        return np.clip(theta, [p.low for p in space], [p.high for p in space])
+        return space.clip(theta)
 
     def _at(self, x: np.ndarray) -> tuple[np.ndarray, list[int]]:
         """The runs of one evaluation: the point at every condition group."""

@@ -126,6 +126,11 @@ class ParameterSpace:
         unit = np.atleast_2d(np.asarray(unit, dtype=float))
         return np.column_stack([p.from_unit(unit[:, i]) for i, p in enumerate(self.parameters)])
 
+    def clip(self, values: np.ndarray) -> np.ndarray:
+        """``values`` (…, d) clipped into the bounds: exp∘log may round a bound one ulp past
+        itself, and Optuna refuses a trial outside its distribution."""
+        return np.clip(values, [p.low for p in self.parameters], [p.high for p in self.parameters])
+
     def to_dict(self) -> list[dict[str, object]]:
         return [p.to_dict() for p in self.parameters]
 
