@@ -1,6 +1,6 @@
 """Benchmark of the calibration (issue 13): the noise floor every time, honest intervals.
 
-Data sets (``surrogate._synthetic.calibration_sets``): four coatings inside the
+Data sets (``surrogate.calibration._synthetic.calibration_sets``): four coatings inside the
 paper's ranges (two near corners) × noise seeds 1–3 (0.02 N at seed 1, 0.05 N at
 2 and 3), four tests at 0 and 20 N end tension; the ``tension`` effect; the
 ``tension`` and ``hardening`` effects together (six free parameters); and two
@@ -46,8 +46,8 @@ sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != 
 
 import surrogate  # noqa: E402
 from surrogate import Rig  # noqa: E402
-from surrogate._calibrate import coat_section  # noqa: E402
-from surrogate._synthetic import calibration_sets, write_calibration_study  # noqa: E402
+from surrogate.calibration._loop import coat_section  # noqa: E402
+from surrogate.calibration._synthetic import calibration_sets, write_calibration_study  # noqa: E402
 
 THICKNESS_MM = Rig().thickness_mm  # the studies use the default rig
 NOISE_FLOOR = 1.05  # RMSE ≤ 1.05 × the truth's

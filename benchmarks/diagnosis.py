@@ -1,6 +1,6 @@
 """Benchmark of the diagnosis (issue 6): is the hidden effect named, and only when there is one?
 
-Each data set is six synthetic tests (``surrogate._synthetic.HIDDEN_EFFECT_TESTS``:
+Each data set is six synthetic tests (``surrogate.calibration._synthetic.HIDDEN_EFFECT_TESTS``:
 two replicates at the reference conditions, one test at 20 N tension, one weft,
 one fast and one slow) with two decoy covariates (``temperature_c``,
 ``humidity_pct``) that vary but never enter the physics. The truth is one of
@@ -47,7 +47,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != ROOT / "benchmarks"]
 
 import surrogate  # noqa: E402
-from surrogate._synthetic import hidden_effect_tests, synthetic_measurements  # noqa: E402
+from surrogate.calibration._synthetic import hidden_effect_tests, synthetic_measurements  # noqa: E402
 
 COATINGS = (
     {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02},

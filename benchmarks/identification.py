@@ -36,9 +36,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != ROOT / "benchmarks"]
 
 import surrogate  # noqa: E402
-from surrogate._objective import constraint_values, meets_target, relative_misfit  # noqa: E402
-from surrogate._run import run  # noqa: E402
-from surrogate._study import Targets, load_study  # noqa: E402
+from surrogate.identify._loop import run  # noqa: E402
+from surrogate.identify._objective import constraint_values, meets_target, relative_misfit  # noqa: E402
+from surrogate.study._spec import Targets, load_study  # noqa: E402
 
 STUDY = ROOT / "studies" / "paper_coating.toml"
 # F60 of three feasible coatings: the paper's optimum, a stiffer and a softer one.

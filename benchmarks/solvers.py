@@ -28,7 +28,7 @@ sys.path[:] = [str(Path(__file__).resolve().parents[1])] + [
 ]
 
 import surrogate  # noqa: E402
-from surrogate._batch import solve_inputs, solver_inputs  # noqa: E402
+from surrogate.solvers._batch import solve_inputs, solver_inputs  # noqa: E402
 
 
 @dataclass(frozen=True)

@@ -26,8 +26,8 @@ sys.path[:] = [str(Path(__file__).resolve().parents[1])] + [
 ]
 
 from surrogate import PAPER_SPACE, make_design  # noqa: E402
-from surrogate._batch import evaluate_design  # noqa: E402
-from surrogate._surrogate_commands import fit_surrogate  # noqa: E402
+from surrogate.identify._commands import fit_surrogate  # noqa: E402
+from surrogate.solvers._batch import evaluate_design  # noqa: E402
 
 SIZES = (10, 20, 40, 64)
 

@@ -22,9 +22,9 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != ROOT / "benchmarks"]
 
-from surrogate._doe import make_design  # noqa: E402
-from surrogate._study import load_study  # noqa: E402
-from surrogate._worker import enqueue_points, finished_records, open_planner_study, work  # noqa: E402
+from surrogate.identify._doe import make_design  # noqa: E402
+from surrogate.identify._worker import enqueue_points, finished_records, open_planner_study, work  # noqa: E402
+from surrogate.study._spec import load_study  # noqa: E402
 from tests.components import ComponentMissing, create_database, throwaway_postgres  # noqa: E402
 
 

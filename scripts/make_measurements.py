@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from surrogate._io import atomic_write_text  # noqa: E402
-from surrogate._synthetic import synthetic_measurements  # noqa: E402
+from surrogate.calibration._synthetic import synthetic_measurements  # noqa: E402
 
 SEED = 20261121
 NOISE_N = 0.05

@@ -15,9 +15,9 @@ from typing import Any, NoReturn
 
 from ._errors import InputDataError, SolverError
 from ._io import atomic_write_text
-from ._rig import Rig
-from ._simulate import BendingCurve, simulate
-from ._space import DESIGNS
+from .solvers._simulate import BendingCurve, simulate
+from .study._rig import Rig
+from .study._space import DESIGNS
 
 __all__ = ["main"]
 
@@ -251,7 +251,7 @@ def _model_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _calibrate(args: argparse.Namespace) -> int:
-    from ._calibrate import calibrate
+    from .calibration._loop import calibrate
 
     if args.jobs < 1:
         raise InputDataError(f"--jobs must be ≥ 1, got {args.jobs}")
@@ -311,8 +311,8 @@ def _parse_params(text: str | None) -> dict[str, float] | None:
 
 
 def _diagnose(args: argparse.Namespace) -> int:
-    from ._diagnose import diagnose, write_ladder_plot
-    from ._study import load_study
+    from .calibration._diagnose import diagnose, write_ladder_plot
+    from .study._spec import load_study
 
     result = diagnose(
         args.study,
@@ -360,7 +360,7 @@ def _diagnose(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from ._compare import compare
+    from .calibration._compare import compare
 
     result = compare(
         args.study,
@@ -417,7 +417,7 @@ def _worker_parser(commands: Any) -> None:
 
 
 def _worker(args: argparse.Namespace) -> int:
-    from ._worker import work
+    from .identify._worker import work
 
     result = work(
         args.study,
@@ -440,7 +440,7 @@ def _worker(args: argparse.Namespace) -> int:
 
 
 def _dashboard(args: argparse.Namespace) -> int:
-    from ._serve import dashboard
+    from .storage._serve import dashboard
 
     try:
         dashboard(args.study, storage=args.storage, port=args.port)
@@ -450,7 +450,7 @@ def _dashboard(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from ._export import export
+    from .identify._export import export
 
     result = export(
         args.study, format=args.format, output=args.output, storage=args.storage, units=args.units
@@ -475,7 +475,7 @@ def _target(text: str) -> float:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from ._run import run
+    from .identify._loop import run
 
     result = run(
         args.study,
@@ -505,7 +505,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _doe(args: argparse.Namespace) -> int:
-    from ._surrogate_commands import doe
+    from .identify._commands import doe
 
     result = doe(
         args.design,
@@ -532,8 +532,8 @@ def _doe(args: argparse.Namespace) -> int:
 
 
 def _fit(args: argparse.Namespace) -> int:
-    from ._surrogate_commands import fit
     from .gp import cross_validation_table
+    from .identify._commands import fit
 
     result = fit(args.samples, out=args.out, seed=args.seed)
     if args.json:
@@ -548,7 +548,7 @@ def _fit(args: argparse.Namespace) -> int:
 
 
 def _predict(args: argparse.Namespace) -> int:
-    from ._surrogate_commands import predict
+    from .identify._commands import predict
 
     result = predict(args.model, args.points, out=args.out)
     if args.json:
@@ -683,7 +683,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as error:
         _fail(f"error: {error.strerror or error}: {error.filename}", EXIT_USAGE)
     except Exception as error:
-        from ._storage import storage_error_message
+        from .storage._storage import storage_error_message
 
         message = storage_error_message(error)
         if message is None:

@@ -25,7 +25,7 @@ class CountingSolve:
         self.stop_after = stop_after
 
     def __call__(self, inputs):
-        from surrogate._batch import solve_inputs
+        from surrogate.solvers._batch import solve_inputs
 
         if self.stop_after is not None and self.calls >= self.stop_after:
             raise KeyboardInterrupt

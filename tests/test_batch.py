@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 
 from surrogate import PAPER_SPACE, SampleSet, make_design
-from surrogate._batch import evaluate_design
+from surrogate.solvers._batch import evaluate_design
 from tests.conftest import CountingSolve
 
 

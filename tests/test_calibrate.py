@@ -1,6 +1,6 @@
 """Calibration against measured curves, and the comparison of model and measurements.
 
-Data are made by the built-in solver with seeded noise (surrogate._synthetic);
+Data are made by the built-in solver with seeded noise (surrogate.calibration._synthetic);
 the truth is known to the test, never to the calibration.
 """
 
@@ -13,7 +13,7 @@ import pytest
 
 import surrogate
 from surrogate._cli import main
-from surrogate._synthetic import synthetic_measurements
+from surrogate.calibration._synthetic import synthetic_measurements
 from surrogate.physics import bending_stiffness, plastic_moment
 
 TRUTH = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
@@ -219,9 +219,9 @@ def test_compare_refuses_params_outside_the_ranges_or_incomplete(tmp_path):
 
 def test_model_state_surrogate_inputs_follow_the_effects(tmp_path):
     """The surrogate sees what the solver sees: a tension effect is a stiffer coat."""
-    from surrogate._calibrate import CalibrationProblem, state_features
-    from surrogate._measurements import load_measurements
-    from surrogate._study import load_study
+    from surrogate.calibration._loop import CalibrationProblem, state_features
+    from surrogate.study._measurements import load_measurements
+    from surrogate.study._spec import load_study
 
     path = _study(tmp_path, BASE_TESTS)
     spec = load_study(path)
@@ -235,9 +235,9 @@ def test_model_state_surrogate_inputs_follow_the_effects(tmp_path):
 
 
 def test_the_fast_mean_of_the_curve_surrogate_is_scikit_learns(tmp_path):
-    from surrogate._calibrate import CalibrationProblem, CurveSurrogate, _Runs
-    from surrogate._measurements import load_measurements
-    from surrogate._study import load_study
+    from surrogate.calibration._loop import CalibrationProblem, CurveSurrogate, _Runs
+    from surrogate.study._measurements import load_measurements
+    from surrogate.study._spec import load_study
 
     spec = load_study(_study(tmp_path, BASE_TESTS))
     problem = CalibrationProblem(spec, load_measurements(spec.measurements_file), ["tension"])

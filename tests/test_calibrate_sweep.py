@@ -1,7 +1,7 @@
 """The calibration reaches the noise floor on a seeded sweep of data sets, says so only
 when it has checked it, and does not depend on the machine.
 
-The data sets are those of ``benchmarks/calibration.py`` (``surrogate._synthetic``):
+The data sets are those of ``benchmarks/calibration.py`` (``surrogate.calibration._synthetic``):
 made by the built-in solver, with the truth known to the test and never to the
 calibration. The benchmark runs all of them with two seeds; here, four of them
 (four coatings, both noise levels, two study seeds) and a misspecified one.
@@ -18,8 +18,8 @@ import pytest
 
 import surrogate
 from surrogate import Rig
-from surrogate._calibrate import coat_section
-from surrogate._synthetic import calibration_sets, write_calibration_study
+from surrogate.calibration._loop import coat_section
+from surrogate.calibration._synthetic import calibration_sets, write_calibration_study
 
 SETS = {case["name"]: case for case in calibration_sets()}
 

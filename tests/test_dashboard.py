@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from surrogate._run import run
+from surrogate.identify._loop import run
 
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 pytestmark = pytest.mark.slow
@@ -81,7 +81,7 @@ def test_dashboard_serves_the_verify_study_with_our_figure_and_note(tmp_path):
 def test_dashboard_shows_what_a_calibration_determined(tmp_path):
     """The calibration study's note states the status, the misfit test and the intervals."""
     from surrogate import calibrate
-    from surrogate._synthetic import calibration_sets, write_calibration_study
+    from surrogate.calibration._synthetic import calibration_sets, write_calibration_study
 
     case = next(c for c in calibration_sets() if c["name"] == "mid-n2")
     study = write_calibration_study(tmp_path, case)

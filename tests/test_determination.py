@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from surrogate._determination import FREE_SHARE, determine
-from surrogate._local import FIRST_ORDER_BOX, gauss_newton_step
+from surrogate.calibration._determination import FREE_SHARE, determine
+from surrogate.calibration._local import FIRST_ORDER_BOX, gauss_newton_step
 
 NAMES = ("a", "b")
 
@@ -125,8 +125,8 @@ def test_the_first_order_test_lets_a_bound_hold_a_parameter():
 
 
 def test_the_fit_coordinates_round_trip_and_hold_a_clipped_coat_at_its_bound():
-    from surrogate._local import FitCoordinates
-    from surrogate._space import PAPER_SPACE
+    from surrogate.calibration._local import FitCoordinates
+    from surrogate.study._space import PAPER_SPACE
 
     coordinates = FitCoordinates(PAPER_SPACE, 1.2)
     rng = np.random.default_rng(0)

@@ -1,6 +1,6 @@
 """The diagnosis on data with a hidden effect and decoy covariates, and without one.
 
-Seeded synthetic data (surrogate._synthetic); the truth is known to the test only.
+Seeded synthetic data (surrogate.calibration._synthetic); the truth is known to the test only.
 The per-effect sweep over every built-in effect is benchmarks/diagnosis.py's job.
 """
 
@@ -11,7 +11,7 @@ import pytest
 
 import surrogate
 from surrogate._cli import main
-from surrogate._synthetic import synthetic_measurements
+from surrogate.calibration._synthetic import synthetic_measurements
 
 TRUTH = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
 NOISE = 0.05

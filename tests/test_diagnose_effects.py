@@ -20,7 +20,11 @@ import pytest
 
 import surrogate
 from surrogate._cli import main
-from surrogate._synthetic import HIDDEN_EFFECT_TESTS, hidden_effect_tests, synthetic_measurements
+from surrogate.calibration._synthetic import (
+    HIDDEN_EFFECT_TESTS,
+    hidden_effect_tests,
+    synthetic_measurements,
+)
 from surrogate.effects import _base
 
 TRUTH = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}

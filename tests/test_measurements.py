@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 
 from surrogate import InputDataError
-from surrogate._measurements import load_measurements
+from surrogate.study._measurements import load_measurements
 
 
 def _table(noise=0.0, seed=0):

@@ -10,9 +10,9 @@ import optuna
 import pytest
 
 import surrogate
-import surrogate._run as run_module
+import surrogate.identify._loop as run_module
 from surrogate import InputDataError, load_study
-from surrogate._run import run
+from surrogate.identify._loop import run
 from tests.conftest import CountingSolve
 
 STUDIES = Path(__file__).resolve().parents[1] / "studies"

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from .._errors import InputDataError
-from .._rig import Rig
+from ..study._rig import Rig
 
 __all__ = [
     "Effect",

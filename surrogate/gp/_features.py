@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._space import COATING_PARAMETERS, ParameterSpace
+from ..study._space import COATING_PARAMETERS, ParameterSpace
 
 __all__ = ["FeatureMap"]
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from .._errors import InputDataError
 from .._io import atomic_write_text
-from .._space import ParameterSpace
+from ..study._space import ParameterSpace
 from ._features import FeatureMap
 from ._output import OutputGP
 

@@ -1,6 +1,6 @@
 """The full-solver interface, its registry, and what every adapter shares.
 
-A solver turns the plain-JSON inputs of :func:`surrogate._batch.solver_inputs`
+A solver turns the plain-JSON inputs of :func:`surrogate.solvers._batch.solver_inputs`
 into a plain-JSON result: ``status`` (``ok``/``failed``), ``reason``, the
 features ``f60_n``, ``theta_sat_deg``, ``saturated`` (always from
 :func:`surrogate.physics.curve_features`) and the curve on whole degrees
@@ -27,10 +27,10 @@ from typing import Any, ClassVar
 import numpy as np
 
 from .._errors import InputDataError, SolverError
-from .._rig import Rig
-from .._simulate import model_state_of
 from ..effects import ModelState
 from ..physics import curve_features
+from ..study._rig import Rig
+from ._simulate import model_state_of
 
 __all__ = [
     "Solver",
@@ -60,7 +60,7 @@ class Solver:
     settings_keys: ClassVar[tuple[str, ...]] = ()
 
     def solve(self, inputs: Mapping[str, Any]) -> dict[str, Any]:  # pragma: no cover
-        """One run; ``inputs`` as made by :func:`surrogate._batch.solver_inputs`."""
+        """One run; ``inputs`` as made by :func:`surrogate.solvers._batch.solver_inputs`."""
         raise NotImplementedError
 
     @classmethod

@@ -5,10 +5,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
-from .._rig import Rig
-from .._simulate import simulate
 from ..physics import SOLVER_VERSION
+from ..study._rig import Rig
 from ._base import Solver, guarded, register_solver
+from ._simulate import simulate
 
 __all__ = ["BuiltinSolver"]
 

@@ -7,13 +7,13 @@ import pytest
 from sklearn.gaussian_process import GaussianProcessRegressor
 
 from surrogate import PAPER_SPACE, CoatingSurrogate, InputDataError, SampleSet
-from surrogate._surrogate_commands import fit_surrogate
+from surrogate.identify._commands import fit_surrogate
 
 
 @pytest.fixture(scope="module")
 def samples(tmp_path_factory):
     from surrogate import make_design
-    from surrogate._batch import evaluate_design
+    from surrogate.solvers._batch import evaluate_design
 
     design = make_design("lhs", n=20, seed=5)
     return evaluate_design(design, PAPER_SPACE, progress=False)

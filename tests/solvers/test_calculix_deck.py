@@ -141,7 +141,7 @@ def test_ccx_stopping_is_a_failed_run_with_its_reason(tmp_path, monkeypatch, exi
     import sys
 
     monkeypatch.setenv("FAKE_CCX_EXIT", exit_code)
-    from surrogate._batch import solve_inputs, solver_inputs
+    from surrogate.solvers._batch import solve_inputs, solver_inputs
 
     settings = {
         "command": [sys.executable, str(FIXTURES / "fake_ccx.py")],

@@ -11,9 +11,9 @@ import pytest
 
 import surrogate
 from surrogate import Rig
-from surrogate._batch import solve_inputs, solver_inputs
-from surrogate._run import run
+from surrogate.identify._loop import run
 from surrogate.physics import curve_features
+from surrogate.solvers._batch import solve_inputs, solver_inputs
 
 pytestmark = [pytest.mark.calculix, pytest.mark.slow]
 
@@ -87,7 +87,7 @@ def test_main_loop_with_calculix_end_to_end(ccx, tmp_path, monkeypatch):
     path = tmp_path / "ccx_loop.toml"
     path.write_text(STUDY)
     counting = _Counting()
-    monkeypatch.setattr("surrogate._run.solve_inputs", counting)
+    monkeypatch.setattr("surrogate.identify._loop.solve_inputs", counting)
     result = run(path, progress=False)
 
     assert result.status == "verified", result.message

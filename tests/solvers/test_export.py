@@ -6,9 +6,9 @@ import pytest
 
 import surrogate
 from surrogate._cli import main
-from surrogate._run import _open_study, _quiet_optuna, _Verifier
-from surrogate._study import load_study
+from surrogate.identify._loop import _open_study, _quiet_optuna, _Verifier
 from surrogate.solvers._lsdyna import FIELD
+from surrogate.study._spec import load_study
 
 OPTIMUM = {"ecoat_gpa": 1.0, "scoat_gpa": 0.2, "tcoat_mm": 0.012}
 OTHER = {"ecoat_gpa": 2.0, "scoat_gpa": 0.1, "tcoat_mm": 0.03}

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from surrogate import InputDataError, Rig, simulate
-from surrogate._batch import solve_inputs, solver_inputs
-from surrogate._cache import input_hash
 from surrogate._cli import main
-from surrogate._study import load_study
 from surrogate.solvers import available_solvers, get_solver
+from surrogate.solvers._batch import solve_inputs, solver_inputs
+from surrogate.solvers._cache import input_hash
+from surrogate.study._spec import load_study
 
 POINT = {"ecoat_gpa": 1.0, "scoat_gpa": 0.2, "tcoat_mm": 0.012}
 

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from surrogate import InputDataError, Rig, simulate
-from surrogate._batch import solve_inputs, solver_inputs
 from surrogate.effects import ModelState
 from surrogate.solvers import (
     LsDynaSolver,
@@ -20,6 +19,7 @@ from surrogate.solvers import (
     parse_nodout_rotation,
     parse_rcforc,
 )
+from surrogate.solvers._batch import solve_inputs, solver_inputs
 from surrogate.solvers._lsdyna import format_real
 
 FIXTURES = Path(__file__).parent / "fixtures"

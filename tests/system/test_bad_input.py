@@ -16,9 +16,9 @@ from pathlib import Path
 import pytest
 
 from surrogate._cli import main
-from surrogate._doe import make_design
-from surrogate._study import load_study
-from surrogate._worker import enqueue_points, open_planner_study, work
+from surrogate.identify._doe import make_design
+from surrogate.identify._worker import enqueue_points, open_planner_study, work
+from surrogate.study._spec import load_study
 from tests.workers.fixed_cost import FixedCostSolve
 
 REPO = Path(__file__).resolve().parents[2]

@@ -20,8 +20,8 @@ from pathlib import Path
 import optuna
 import pytest
 
-from surrogate._run import run
-from surrogate._storage import open_storage
+from surrogate.identify._loop import run
+from surrogate.storage._storage import open_storage
 from tests.components import free_port
 
 REPO = Path(__file__).resolve().parents[2]

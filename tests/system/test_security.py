@@ -36,7 +36,7 @@ def test_no_unpickling_and_no_shell(path):
 
 
 def test_dashboard_binds_loopback_only():
-    from surrogate._serve import HOST
+    from surrogate.storage._serve import HOST
 
     assert HOST == "127.0.0.1"
 

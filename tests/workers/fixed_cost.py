@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from surrogate._cache import input_hash
+from surrogate.solvers._cache import input_hash
 
 
 class FixedCostSolve:
@@ -68,7 +68,7 @@ def events(log: str | Path) -> list[tuple[str, str, int]]:
 
 
 def main(argv: list[str]) -> int:
-    from surrogate._worker import work
+    from surrogate.identify._worker import work
 
     study, storage, log, cost = argv[:4]
     jobs = int(argv[4]) if len(argv) > 4 else 1

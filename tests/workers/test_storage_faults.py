@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from surrogate._doe import make_design
-from surrogate._study import load_study
-from surrogate._worker import enqueue_points, open_planner_study
+from surrogate.identify._doe import make_design
+from surrogate.identify._worker import enqueue_points, open_planner_study
+from surrogate.study._spec import load_study
 
 REPO = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.slow

@@ -1,7 +1,7 @@
 """Many workers on one storage: every run exactly once, faults cost one run at most.
 
 Workers are real processes (``python -m tests.workers.fixed_cost``) running
-``surrogate._worker.work`` with the fixed-cost stand-in solver, on the journal
+``surrogate.identify._worker.work`` with the fixed-cost stand-in solver, on the journal
 file and on a throwaway PostgreSQL server.
 """
 
@@ -19,10 +19,10 @@ from pathlib import Path
 import optuna
 import pytest
 
-from surrogate._doe import make_design
-from surrogate._storage import open_storage
-from surrogate._study import load_study
-from surrogate._worker import enqueue_points, open_planner_study, work
+from surrogate.identify._doe import make_design
+from surrogate.identify._worker import enqueue_points, open_planner_study, work
+from surrogate.storage._storage import open_storage
+from surrogate.study._spec import load_study
 from tests.workers.fixed_cost import FixedCostSolve, events
 
 REPO = Path(__file__).resolve().parents[2]

@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from .._errors import InputDataError
 from ._conditions import CONDITIONS, DIRECTIONS
-from ._errors import InputDataError
 
 __all__ = ["MeasurementSet", "load_measurements"]
 

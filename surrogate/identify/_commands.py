@@ -10,15 +10,15 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ._batch import evaluate_design
+from .._errors import InputDataError
+from .._io import atomic_write_text
+from ..gp import CoatingSurrogate
+from ..solvers._batch import evaluate_design
+from ..study._rig import Rig
+from ..study._samples import SampleSet, read_points
+from ..study._space import PAPER_SPACE, ParameterSpace
+from ..study._spec import StudySpec, load_study
 from ._doe import make_design
-from ._errors import InputDataError
-from ._io import atomic_write_text
-from ._rig import Rig
-from ._samples import SampleSet, read_points
-from ._space import PAPER_SPACE, ParameterSpace
-from ._study import StudySpec, load_study
-from .gp import CoatingSurrogate
 
 __all__ = ["DoeResult", "FitResult", "PredictResult", "doe", "fit", "fit_surrogate", "predict"]
 

@@ -12,12 +12,12 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
+from .._errors import InputDataError
+from ..physics import SOLVER_VERSION
+from ..study._rig import Rig
+from ..study._samples import SampleSet
+from ..study._space import COATING_PARAMETERS, ParameterSpace
 from ._cache import ResultCache, input_hash
-from ._errors import InputDataError
-from ._rig import Rig
-from ._samples import SampleSet
-from ._space import COATING_PARAMETERS, ParameterSpace
-from .physics import SOLVER_VERSION
 
 __all__ = ["evaluate_design", "solve_inputs", "solver_inputs"]
 
@@ -70,7 +70,7 @@ def solver_inputs(
 
 
 def _solver_version(solver: str) -> str:
-    from .solvers import get_solver
+    from . import get_solver
 
     return get_solver(solver).version or SOLVER_VERSION
 
@@ -78,7 +78,7 @@ def _solver_version(solver: str) -> str:
 def solve_inputs(inputs: dict[str, Any]) -> dict[str, Any]:
     """Run the solver named by ``inputs["solver"]`` (:func:`surrogate.solvers.get_solver`)
     on :func:`solver_inputs`; a failure is a result, not an exception."""
-    from .solvers import get_solver
+    from . import get_solver
 
     return get_solver(inputs.get("solver", "builtin")).solve(inputs)
 

@@ -14,7 +14,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from ._io import atomic_write_text
+from .._io import atomic_write_text
 
 __all__ = ["ResultCache", "canonical_json", "input_hash"]
 

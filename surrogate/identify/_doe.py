@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 from scipy.stats import qmc
 
-from ._errors import InputDataError
-from ._space import COATING_PARAMETERS, DESIGNS, PAPER_SPACE, ParameterSpace
+from .._errors import InputDataError
+from ..study._space import COATING_PARAMETERS, DESIGNS, PAPER_SPACE, ParameterSpace
 
 __all__ = ["DESIGNS", "PAPER_STAGE1_LEVELS", "make_design", "paper_stage1_design"]
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ._errors import InputDataError
+from .._errors import InputDataError
 from ._rig import Rig
 from ._space import COATING_PARAMETERS, PAPER_SPACE, ParameterSpace, ParameterSpec
 
@@ -180,7 +180,7 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
 
 def _solver(section: dict[str, Any], where: str, path: Path | None) -> tuple[str, dict[str, Any]]:
     """``[solver]``: the kind and its validated settings (see :mod:`surrogate.solvers`)."""
-    from .solvers import get_solver
+    from ..solvers import get_solver
 
     settings = dict(section)
     kind = settings.pop("kind", "builtin")

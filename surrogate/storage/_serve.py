@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._errors import InputDataError
+from .._errors import InputDataError
+from ..study._spec import StudySpec, load_study
 from ._storage import missing_local_storage, open_storage
-from ._study import StudySpec, load_study
 
 __all__ = ["dashboard"]
 

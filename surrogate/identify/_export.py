@@ -11,10 +11,10 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from ._errors import InputDataError
-from ._io import atomic_write_text
-from ._study import StudySpec, load_study
-from ._units import gpa_to_mpa
+from .._errors import InputDataError
+from .._io import atomic_write_text
+from ..study._spec import StudySpec, load_study
+from ..study._units import gpa_to_mpa
 
 __all__ = ["EXPORT_FORMATS", "ExportResult", "export"]
 
@@ -77,7 +77,7 @@ def export(
         Unknown format or units, no verify study in the storage, or no verified
         point that meets the target yet.
     """
-    from .solvers._lsdyna import LSDYNA_UNITS
+    from ..solvers._lsdyna import LSDYNA_UNITS
 
     if format not in EXPORT_FORMATS:
         raise InputDataError(f"--format must be one of {', '.join(EXPORT_FORMATS)}, got {format!r}")
@@ -112,7 +112,7 @@ def export(
 def _verified_optimum(spec: StudySpec, url: str) -> tuple[dict[str, Any], str]:
     import optuna
 
-    from ._run import _quiet_optuna, _Verifier, verify_study_name
+    from ._loop import _quiet_optuna, _Verifier, verify_study_name
 
     _quiet_optuna()
     name = verify_study_name(spec)
@@ -134,7 +134,7 @@ def _verified_optimum(spec: StudySpec, url: str) -> tuple[dict[str, Any], str]:
 
 
 def _deck_values(params: dict[str, float], units: str) -> dict[str, float]:
-    from .solvers._lsdyna import LSDYNA_UNITS
+    from ..solvers._lsdyna import LSDYNA_UNITS
 
     stress, length, _ = LSDYNA_UNITS[units]
     return {
@@ -147,7 +147,7 @@ def _deck_values(params: dict[str, float], units: str) -> dict[str, float]:
 def _lsdyna_text(
     spec: StudySpec, chosen: dict[str, Any], values: dict[str, float], units: str, name: str
 ) -> str:
-    from .solvers._lsdyna import FIELD, fill_parameters
+    from ..solvers._lsdyna import FIELD, fill_parameters
 
     stress = {"mm-N-s": "MPa", "mm-kg-ms": "GPa", "m-kg-s": "Pa"}[units]
     length = "m" if units == "m-kg-s" else "mm"
@@ -162,7 +162,7 @@ def _lsdyna_text(
         "*KEYWORD",
     ]
     block = fill_parameters("\n".join(header), values).splitlines()
-    from .solvers._lsdyna import format_real
+    from ..solvers._lsdyna import format_real
 
     snippet = [
         "$",

@@ -39,11 +39,18 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
 
-from ._batch import solve_inputs, solver_inputs
-from ._cache import ResultCache, input_hash
-from ._conditions import CONDITIONS
+from .._errors import InputDataError
+from ..effects import ModelState, get_effect, load_plugin
+from ..physics import bending_stiffness, plastic_moment
+from ..solvers._batch import solve_inputs, solver_inputs
+from ..solvers._cache import ResultCache, input_hash
+from ..solvers._simulate import model_state_of
+from ..study._conditions import CONDITIONS
+from ..study._measurements import MeasurementSet, load_measurements
+from ..study._space import ParameterSpace, ParameterSpec
+from ..study._spec import StudySpec, load_study
+from ..study._units import gpa_to_mpa
 from ._determination import determine
-from ._errors import InputDataError
 from ._local import (
     FIRST_ORDER_BOX,
     BudgetSpent,
@@ -52,14 +59,7 @@ from ._local import (
     SolverFailed,
     local_fit,
 )
-from ._measurements import MeasurementSet, load_measurements
-from ._simulate import model_state_of
-from ._space import ParameterSpace, ParameterSpec
 from ._statistics import SIGNIFICANCE, misfit_p_value, noise_dof
-from ._study import StudySpec, load_study
-from ._units import gpa_to_mpa
-from .effects import ModelState, get_effect, load_plugin
-from .physics import bending_stiffness, plastic_moment
 
 __all__ = [
     "CalibrationProblem",
@@ -398,7 +398,7 @@ class CalibrationResult:
     this calibration used (a run already in the result cache is not repeated).
 
     ``status`` is ``converged`` only when the local phase's first-order test held
-    at ``params`` (a verified point; see :mod:`surrogate._local`), else
+    at ``params`` (a verified point; see :mod:`surrogate.calibration._local`), else
     ``budget_exhausted`` (``params`` is then the best verified point).
     ``predicted_gain`` is what that test measured: the relative RMSE decrease the
     Gauss–Newton model still promises within ±5 % of each range (``None`` unless
@@ -406,7 +406,7 @@ class CalibrationResult:
     ``converged``: ``misfit`` is ``"within the noise"`` or ``"systematic"`` by the
     F-test of the RSS against the noise (``misfit_p_value``; systematic below
     0.01), and ``determination`` says what the curves determine (the keys of
-    :class:`~surrogate._determination.Determination`: 95 % intervals of the
+    :class:`~surrogate.calibration._determination.Determination`: 95 % intervals of the
     bending stiffness ``bending_stiffness_nmm`` [N·mm per unit width], the plastic
     moment ``plastic_moment_n`` [N·mm/mm = N] and each parameter, the free
     parameters, those held at a bound). Both are ``None`` unless ``converged``.
@@ -476,7 +476,7 @@ class _Runs:
                 todo.append(i)
             else:
                 results[i] = hit
-        from ._batch import _run as run_pool
+        from ..solvers._batch import _run as run_pool
 
         for i, result in run_pool(todo, [it[2] for it in items], solve_inputs, self.jobs):
             self.cache.put(keys[i], items[i][2], result)
@@ -690,7 +690,7 @@ class _Loop:
        the surrogate sees nothing better than the best verified point (or
        ``STALE_LIMIT`` verifications bring no improvement). It finds the basin; it
        proves nothing.
-    2. *Local*: :func:`~surrogate._local.local_fit` from the best verified point,
+    2. *Local*: :func:`~surrogate.calibration._local.local_fit` from the best verified point,
        until the first-order test holds at a verified point.
     3. *Other basins*: the surrogate, refitted on every run so far, is searched
        again; where it predicts a fit better than the best local optimum (however

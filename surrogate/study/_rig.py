@@ -6,8 +6,8 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-from ._errors import InputDataError
-from ._validate import check_positive, check_range
+from .._errors import InputDataError
+from .._validate import check_positive, check_range
 
 __all__ = ["Rig"]
 

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._errors import InputDataError
-from ._validate import check_finite
+from .._errors import InputDataError
+from .._validate import check_finite
 
 __all__ = [
     "COATING_PARAMETERS",

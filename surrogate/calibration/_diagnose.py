@@ -49,7 +49,11 @@ import numpy as np
 import optuna
 from scipy import stats
 
-from ._calibrate import (
+from .._errors import InputDataError
+from ..effects import available_effects, get_effect
+from ._compare import BANDS, _bands, column_values
+from ._local import ResidualModel, SolverFailed, local_fit
+from ._loop import (
     CalibrationProblem,
     _load,
     _Runs,
@@ -58,11 +62,7 @@ from ._calibrate import (
     calibration_study_name,
     model_label,
 )
-from ._compare import BANDS, _bands, column_values
-from ._errors import InputDataError
-from ._local import ResidualModel, SolverFailed, local_fit
 from ._statistics import SIGNIFICANCE, bic, misfit_p_value, noise_dof
-from .effects import available_effects, get_effect
 
 __all__ = ["DiagnosisResult", "diagnose", "model_ladder"]
 

@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ._conditions import CONDITIONS
-from ._rig import Rig
-from ._simulate import simulate
+from ..solvers._simulate import simulate
+from ..study._conditions import CONDITIONS
+from ..study._rig import Rig
 
 __all__ = [
     "HIDDEN_EFFECT_TESTS",

@@ -25,7 +25,9 @@ from typing import Any
 import numpy as np
 import optuna
 
-from ._calibrate import (
+from .._errors import InputDataError, SolverError
+from ..physics import curve_features
+from ._loop import (
     CalibrationProblem,
     _load,
     _Runs,
@@ -33,8 +35,6 @@ from ._calibrate import (
     calibration_study_name,
     model_label,
 )
-from ._errors import InputDataError, SolverError
-from .physics import curve_features
 
 __all__ = ["CompareResult", "compare", "latest_calibration"]
 

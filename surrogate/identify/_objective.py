@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from ._study import StudySpec
+from ..study._spec import StudySpec
 
 __all__ = [
     "CONSTRAINT_NAMES",

@@ -38,7 +38,7 @@ from optuna.storages._heartbeat import BaseHeartbeat
 from optuna.storages.journal import JournalFileBackend
 from optuna.trial import FrozenTrial, TrialState
 
-from ._errors import InputDataError
+from .._errors import InputDataError
 
 __all__ = [
     "StorageError",

@@ -31,18 +31,18 @@ import optuna
 from optuna.storages import RetryHeartbeatStaleTrialCallback
 from optuna.trial import FrozenTrial, TrialState
 
-from ._batch import solve_inputs, solver_inputs
-from ._cache import ResultCache, input_hash
-from ._errors import InputDataError
-from ._run import _open_study, _quiet_optuna, _record_of, tell_verification, verify_study_name
-from ._storage import (
+from .._errors import InputDataError
+from ..solvers._batch import solve_inputs, solver_inputs
+from ..solvers._cache import ResultCache, input_hash
+from ..storage._storage import (
     MAX_RETRY,
     check_workers,
     open_storage,
     stale_trial_check,
     storage_errors,
 )
-from ._study import StudySpec, Targets, load_study
+from ..study._spec import StudySpec, Targets, load_study
+from ._loop import _open_study, _quiet_optuna, _record_of, tell_verification, verify_study_name
 
 __all__ = ["WorkerResult", "enqueue_points", "finished_records", "work"]
 
@@ -210,7 +210,7 @@ def work(
     idle_timeout_s : float
         Wait this long for new trials once the queue is empty and nothing runs.
     solve : callable
-        The full solver on :func:`surrogate._batch.solver_inputs` (tests pass a
+        The full solver on :func:`surrogate.solvers._batch.solver_inputs` (tests pass a
         cheap stand-in here; a study file cannot).
     progress : bool
         One line per finished run on stderr.
@@ -246,7 +246,7 @@ def _work_in_processes(
     # forkserver: a clean process (no inherited database connections) that has
     # imported the package once; each worker forks from it in milliseconds
     context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(["surrogate._worker"])
+    context.set_forkserver_preload(["surrogate.identify._worker"])
     results = context.SimpleQueue()
     processes = [
         context.Process(

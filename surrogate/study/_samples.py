@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ._errors import InputDataError
-from ._io import atomic_write_text
+from .._errors import InputDataError
+from .._io import atomic_write_text
 from ._space import PAPER_SPACE, ParameterSpace, ParameterSpec
 
 __all__ = ["OUTPUT_COLUMNS", "SampleSet", "curves_path", "meta_path", "read_points"]

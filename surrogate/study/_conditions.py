@@ -10,9 +10,9 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from ._errors import InputDataError
+from .._errors import InputDataError
+from .._validate import check_positive, check_range
 from ._rig import Rig
-from ._validate import check_positive, check_range
 
 __all__ = ["CONDITIONS", "DIRECTIONS", "check_conditions", "rig_for"]
 

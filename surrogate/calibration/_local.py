@@ -39,9 +39,9 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
-from ._space import COATING_PARAMETERS
-from ._units import gpa_to_mpa
-from .physics import bending_stiffness, plastic_moment
+from ..physics import bending_stiffness, plastic_moment
+from ..study._space import COATING_PARAMETERS
+from ..study._units import gpa_to_mpa
 
 __all__ = [
     "BudgetSpent",

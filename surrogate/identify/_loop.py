@@ -23,17 +23,17 @@ import optuna
 import pandas as pd
 from scipy.stats import norm
 
-from ._batch import solve_inputs, solver_inputs
-from ._cache import ResultCache, input_hash
-from ._dashboard import attach_run_report
+from .._errors import InputDataError
+from ..solvers._batch import solve_inputs, solver_inputs
+from ..solvers._cache import ResultCache, input_hash
+from ..storage._dashboard import attach_run_report
+from ..storage._storage import check_workers
+from ..study._samples import SampleSet
+from ..study._spec import StudySpec, Targets, load_study
+from ._commands import fit_surrogate
 from ._doe import make_design
-from ._errors import InputDataError
 from ._identifiability import assess_identifiability
 from ._objective import constraint_values, is_feasible, meets_target, relative_misfit
-from ._samples import SampleSet
-from ._storage import check_workers
-from ._study import StudySpec, Targets, load_study
-from ._surrogate_commands import fit_surrogate
 
 __all__ = ["RunResult", "run", "tell_verification", "verify_study_name"]
 

@@ -8,13 +8,13 @@ from typing import Any
 
 import numpy as np
 
-from ._conditions import check_conditions, rig_for
-from ._errors import InputDataError, SolverError
-from ._rig import Rig
-from ._units import gpa_to_mpa
-from ._validate import check_positive
-from .effects import ModelState, get_effect
-from .physics import CoatingSection, curve_features, default_mesh, solve_rod, uniform_mesh
+from .._errors import InputDataError, SolverError
+from .._validate import check_positive
+from ..effects import ModelState, get_effect
+from ..physics import CoatingSection, curve_features, default_mesh, solve_rod, uniform_mesh
+from ..study._conditions import check_conditions, rig_for
+from ..study._rig import Rig
+from ..study._units import gpa_to_mpa
 
 __all__ = ["BendingCurve", "coating_state", "simulate"]
 
@@ -198,9 +198,9 @@ def _external(
     settings: Mapping[str, Any] | None,
 ) -> BendingCurve:
     """One run of a solver of :mod:`surrogate.solvers`; bad input raises before it starts."""
+    from . import get_solver
+    from ._base import model_state
     from ._batch import solver_inputs
-    from .solvers import get_solver
-    from .solvers._base import model_state
 
     adapter = get_solver(solver)
     point = dict(zip(("ecoat_gpa", "scoat_gpa", "tcoat_mm"), coating, strict=True))

@@ -1,0 +1,88 @@
+"""The one process pool: a function over tasks in worker processes, results as they finish.
+
+One start method for every parallel part of the package (batch evaluation, the
+calibration's solver runs, the diagnosis's refits, verification workers):
+``fork`` where the platform has it — fast, and effects registered in this process
+(plug-ins, or in code) exist in the children too. Each child limits its BLAS to
+one thread: several processes each spinning a BLAS thread pool on the same cores
+run about ten times slower. Without ``fork`` (Windows, macOS default) the work
+runs serially in this process rather than losing registered plug-ins.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from typing import Any, TypeVar
+
+from ._errors import InputDataError
+
+__all__ = ["can_fork", "check_jobs", "imap_unordered", "process_context", "worker_count"]
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+def can_fork() -> bool:
+    return "fork" in multiprocessing.get_all_start_methods()
+
+
+def process_context() -> Any:
+    """The multiprocessing context of every child process the package starts."""
+    return multiprocessing.get_context("fork" if can_fork() else "spawn")
+
+
+def one_blas_thread() -> None:
+    """Initializer of every child: one BLAS thread (see the module docstring)."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
+
+
+def check_jobs(jobs: Any, *, name: str = "jobs", minimum: int = 1) -> int:
+    """``jobs`` as a whole number ≥ ``minimum``, or an InputDataError naming it."""
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < minimum:
+        raise InputDataError(f"{name} must be a whole number ≥ {minimum}, got {jobs!r}")
+    return jobs
+
+
+def worker_count(jobs: int | None, tasks: int) -> int:
+    """Processes for ``tasks`` tasks: ``jobs`` (all cores when None), never more than tasks."""
+    if jobs is not None:
+        check_jobs(jobs)
+    return max(1, min(jobs or os.cpu_count() or 1, tasks))
+
+
+def imap_unordered(
+    function: Callable[[T], R], tasks: Sequence[T], jobs: int
+) -> Iterator[tuple[int, R]]:
+    """``(index, function(tasks[index]))`` for every task, in the order they finish.
+
+    ``jobs`` = 1 (or one task, or no ``fork``) runs in this process. At most
+    ``2 × jobs`` tasks are submitted ahead, so an interrupt cancels the rest at
+    once; an exception in a task (or here) shuts the pool down without waiting.
+    """
+    check_jobs(jobs)
+    if jobs == 1 or len(tasks) <= 1 or not can_fork():
+        for index, task in enumerate(tasks):
+            yield index, function(task)
+        return
+    with ProcessPoolExecutor(
+        max_workers=jobs, mp_context=process_context(), initializer=one_blas_thread
+    ) as pool:
+        pending: dict[Future[R], int] = {}
+        queue = list(range(len(tasks)))
+        queue.reverse()
+        try:
+            while queue or pending:
+                while queue and len(pending) < 2 * jobs:
+                    index = queue.pop()
+                    pending[pool.submit(function, tasks[index])] = index
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for future in done:
+                    yield pending.pop(future), future.result()
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
