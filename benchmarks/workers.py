@@ -23,7 +23,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != ROOT / "benchmarks"]
 
 from surrogate.identify._doe import make_design  # noqa: E402
-from surrogate.identify._worker import enqueue_points, finished_records, open_planner_study, work  # noqa: E402
+from surrogate.identify._verify import enqueue, finished_records, open_verify_study  # noqa: E402
+from surrogate.identify._worker import work  # noqa: E402
 from surrogate.study._spec import load_study  # noqa: E402
 from tests.components import ComponentMissing, create_database, throwaway_postgres  # noqa: E402
 
@@ -57,9 +58,9 @@ def _one(folder: Path, storage: str, runs: int, workers: int, cost_s: float) -> 
     folder.mkdir()
     shutil.copy(ROOT / "studies" / "paper_coating.toml", folder / "study.toml")
     spec = load_study(folder / "study.toml")
-    study = open_planner_study(spec, storage, heartbeat_s=None)
+    study = open_verify_study(spec, storage, heartbeat_s=None)
     points = make_design("lhs", spec.space, n=runs, seed=0).to_dict("records")
-    keys = enqueue_points(study, spec, points, phase="benchmark")
+    keys = enqueue(study, spec, points, phase="benchmark")
     start = time.perf_counter()
     result = work(
         spec,

@@ -2,6 +2,14 @@
 
 The public Python API; every CLI command of ``surrogate`` is a function here
 of the same name. Heavy parts (scikit-learn, pandas, Optuna) load on first use.
+
+The packages, top down (a package imports from its own row or the rows below)::
+
+    _cli.py → this API (here)
+      → identify/     the main job: loop, verify study, workers, export
+        calibration/  measurements → calibrate → compare → diagnose
+      → solvers/ (builtin, CalculiX, LS-DYNA), gp/, effects/, study/, storage/
+      → physics/ (the rod, the coating section, curve features)
 """
 
 from importlib import import_module

@@ -1,6 +1,13 @@
 """The ``surrogate`` command: thin, each command parses, calls the API, prints.
 
+Each command is a pair: ``_add_<command>(subparsers)`` declares its arguments and
+returns its parser, and the handler ``_<command>(args)`` that follows it calls the
+Python API and prints the result. ``_COMMANDS`` lists the pairs in the order of
+``surrogate --help``. Arguments that several commands take (``--json``,
+``--storage``, ``--plugin``, ``--effect``) are declared once, in a helper each.
+
 Errors are one line on stderr with exit code 2; nothing is half-written.
+Progress of long runs goes through :mod:`logging` (see :mod:`surrogate._log`).
 """
 
 from __future__ import annotations
@@ -9,12 +16,14 @@ import argparse
 import json
 import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
 from ._errors import InputDataError, SolverError
 from ._io import atomic_write_text
+from ._log import show_progress
+from .solvers import available_solvers
 from .solvers._simulate import BendingCurve, simulate
 from .study._rig import Rig
 from .study._space import DESIGNS
@@ -24,6 +33,9 @@ __all__ = ["main"]
 EXIT_USAGE = 2
 EXIT_SOLVER = 3
 
+_Subparsers = argparse._SubParsersAction  # what ``add_subparsers`` returns
+_Handler = Callable[[argparse.Namespace], int]
+
 
 class _OneLineParser(argparse.ArgumentParser):
     """Argument errors as one line (argparse prints the whole usage)."""
@@ -32,7 +44,116 @@ class _OneLineParser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
 
 
-def _rig_options(parser: argparse.ArgumentParser) -> None:
+# Arguments that several commands share -------------------------------------------------
+
+
+def _add_json(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def _add_storage(
+    parser: argparse.ArgumentParser,
+    help: str = "Optuna storage URL (default: SQLite next to the study)",
+    required: bool = False,
+) -> None:
+    parser.add_argument("--storage", required=required, help=help)
+
+
+def _add_plugin(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--plugin",
+        action="append",
+        default=[],
+        metavar="MODULE",
+        help="import a module of your own effects first (repeatable)",
+    )
+
+
+def _add_model_options(parser: argparse.ArgumentParser) -> None:
+    """``--effect NAME`` (the model's effects) and ``--plugin`` of the calibration commands."""
+    parser.add_argument(
+        "--effect",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="an effect of the model (repeatable; default: the study's [model] effects)",
+    )
+    _add_plugin(parser)
+
+
+def _print_json(payload: Any) -> None:
+    print(json.dumps(payload, allow_nan=True))
+
+
+# surrogate simulate --------------------------------------------------------------------
+
+
+def _add_simulate(commands: _Subparsers) -> argparse.ArgumentParser:
+    sim = commands.add_parser("simulate", help="run the full solver for one coating")
+    sim.add_argument("--ecoat", type=float, required=True, help="coat Young's modulus [GPa]")
+    sim.add_argument("--scoat", type=float, required=True, help="coat yield stress [GPa]")
+    sim.add_argument("--tcoat", type=float, required=True, help="coat thickness [mm]")
+    _add_rig_options(sim)
+    sim.add_argument(
+        "--effect",
+        action="append",
+        default=[],
+        metavar="NAME[:P=V,...]",
+        help="switch on a physical effect, e.g. hardening:ratio=0.05 (repeatable)",
+    )
+    sim.add_argument(
+        "--condition",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a test condition, e.g. direction=weft, tension_n=20 (repeatable)",
+    )
+    _add_plugin(sim)
+    sim.add_argument(
+        "--solver",
+        choices=available_solvers(),
+        default="builtin",
+        help="full solver (default: builtin)",
+    )
+    sim.add_argument(
+        "--solver-option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a setting of an external solver, e.g. mesh=fine, timeout_s=600 (repeatable)",
+    )
+    sim.add_argument("--out", type=Path, help="write angle_deg,force_n,force_perp_n to this CSV")
+    _add_json(sim)
+    return sim
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    from .effects import load_plugin
+
+    for module in args.plugin:
+        load_plugin(module)
+    curve = simulate(
+        args.ecoat,
+        args.scoat,
+        args.tcoat,
+        rig=_rig_from(args),
+        effects=_parse_effects(args.effect),
+        conditions=_parse_conditions(args.condition),
+        solver=args.solver,
+        solver_settings=_parse_solver_options(args.solver_option),
+    )
+    if args.out is not None:
+        atomic_write_text(args.out, _curve_csv(curve))
+    if args.json:
+        _print_json(curve.to_json())
+    else:
+        print(_curve_table(curve))
+        if args.out is not None:
+            print(f"curve written to {args.out}")
+    return 0
+
+
+def _add_rig_options(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("rig (defaults: design.md §3)")
     default = Rig()
     for flag, field, unit in (
@@ -56,511 +177,6 @@ def _rig_options(parser: argparse.ArgumentParser) -> None:
 def _rig_from(args: argparse.Namespace) -> Rig:
     fields = Rig.__dataclass_fields__
     return Rig(**{name: getattr(args, name) for name in fields})
-
-
-def _build_parser() -> argparse.ArgumentParser:
-    parser = _OneLineParser(
-        prog="surrogate",
-        description="Identify the coating of seat-belt webbing from 2-point bending tests.",
-    )
-    commands = parser.add_subparsers(dest="command", required=True, parser_class=_OneLineParser)
-    sim = commands.add_parser("simulate", help="run the full solver for one coating")
-    sim.add_argument("--ecoat", type=float, required=True, help="coat Young's modulus [GPa]")
-    sim.add_argument("--scoat", type=float, required=True, help="coat yield stress [GPa]")
-    sim.add_argument("--tcoat", type=float, required=True, help="coat thickness [mm]")
-    _rig_options(sim)
-    sim.add_argument(
-        "--effect",
-        action="append",
-        default=[],
-        metavar="NAME[:P=V,...]",
-        help="switch on a physical effect, e.g. hardening:ratio=0.05 (repeatable)",
-    )
-    sim.add_argument(
-        "--condition",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="a test condition, e.g. direction=weft, tension_n=20 (repeatable)",
-    )
-    sim.add_argument(
-        "--plugin",
-        action="append",
-        default=[],
-        metavar="MODULE",
-        help="import a module of your own effects first (repeatable)",
-    )
-    sim.add_argument(
-        "--solver",
-        choices=("builtin", "calculix", "lsdyna"),
-        default="builtin",
-        help="full solver (default: builtin)",
-    )
-    sim.add_argument(
-        "--solver-option",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="a setting of an external solver, e.g. mesh=fine, timeout_s=600 (repeatable)",
-    )
-    sim.add_argument("--out", type=Path, help="write angle_deg,force_n,force_perp_n to this CSV")
-    sim.add_argument("--json", action="store_true", help="print one JSON object")
-    sim.set_defaults(handler=_simulate)
-
-    design = commands.add_parser("doe", help="make a design of experiments, optionally run it")
-    design.add_argument(
-        "--design",
-        choices=DESIGNS,
-        default="lhs",
-        help="factorial (--n levels per parameter), lhs, sobol, or paper "
-        "(the paper's 64 Table-1 cases)",
-    )
-    design.add_argument("--n", type=int, default=16, help="points (levels for factorial)")
-    design.add_argument("--seed", type=int, default=None, help="seed (default: the study's, or 0)")
-    design.add_argument("--study", type=Path, help="take ranges and rig from this study file")
-    design.add_argument(
-        "--from",
-        dest="points_file",
-        type=Path,
-        help="take the points from this CSV instead (parameter columns)",
-    )
-    design.add_argument("--run", action="store_true", help="run the full solver on the design")
-    design.add_argument("--jobs", type=int, default=1, help="worker processes for --run")
-    design.add_argument(
-        "--cache",
-        type=Path,
-        default=None,
-        help="result cache folder (default: .solver-cache next to --out)",
-    )
-    design.add_argument("--out", type=Path, required=True, help="CSV to write")
-    design.add_argument("--json", action="store_true", help="print one JSON object")
-    design.set_defaults(handler=_doe)
-
-    fitting = commands.add_parser("fit", help="fit the GP surrogates to a sample set")
-    fitting.add_argument("samples", type=Path, help="sample set CSV (from doe --run)")
-    fitting.add_argument("--out", type=Path, help="model JSON to write")
-    fitting.add_argument("--seed", type=int, default=0, help="seed of the optimiser restarts")
-    fitting.add_argument("--json", action="store_true", help="print one JSON object")
-    fitting.set_defaults(handler=_fit)
-
-    prediction = commands.add_parser("predict", help="predict F60 and theta_sat at points")
-    prediction.add_argument("model", type=Path, help="model JSON (from fit)")
-    prediction.add_argument("points", type=Path, help="CSV with the parameter columns")
-    prediction.add_argument("--out", type=Path, help="CSV to write (points + predictions)")
-    prediction.add_argument("--json", action="store_true", help="print one JSON object")
-    prediction.set_defaults(handler=_predict)
-
-    running = commands.add_parser(
-        "run", help="the main job: find the coating that meets the study's target"
-    )
-    running.add_argument("study", type=Path, help="study file (studies/*.toml)")
-    running.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
-    running.add_argument("--seed", type=int, help="override [study] seed")
-    running.add_argument("--target", type=_target, help="override the target: f60_n=VALUE")
-    running.add_argument("--budget", type=int, help="override [budget] max_solver_calls")
-    running.add_argument(
-        "--jobs",
-        type=int,
-        default=1,
-        help="N local worker processes verify through the storage (journal or PostgreSQL); "
-        "0: queue the runs for `surrogate worker` processes elsewhere (default 1)",
-    )
-    running.add_argument("--json", action="store_true", help="print one JSON object")
-    running.set_defaults(handler=_run)
-
-    cal = commands.add_parser(
-        "calibrate", help="fit the coating and the model's effects to the measured curves"
-    )
-    cal.add_argument("study", type=Path, help="study file with [measurements]")
-    _model_options(cal)
-    cal.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
-    cal.add_argument(
-        "--budget", type=int, help="override [budget] calibration_solver_calls (full-solver runs)"
-    )
-    cal.add_argument("--jobs", type=int, default=1, help="solver processes per verification")
-    cal.add_argument("--json", action="store_true", help="print one JSON object")
-    cal.set_defaults(handler=_calibrate)
-
-    comp = commands.add_parser(
-        "compare", help="measured vs model curves: residuals per test, angle band, covariate"
-    )
-    comp.add_argument("study", type=Path, help="study file with [measurements]")
-    _model_options(comp)
-    comp.add_argument(
-        "--params",
-        help="parameters to compare, e.g. ecoat_gpa=1.2,scoat_gpa=0.15,tcoat_mm=0.02 "
-        "(default: the last calibration of this model)",
-    )
-    comp.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
-    comp.add_argument("--output", type=Path, help="folder of the PNG plots")
-    comp.add_argument("--no-plots", action="store_true", help="write no PNG files")
-    comp.add_argument("--json", action="store_true", help="print one JSON object")
-    comp.set_defaults(handler=_compare)
-    exporting = commands.add_parser(
-        "export", help="the verified optimum of a study as LS-DYNA keyword text"
-    )
-    exporting.add_argument("study", type=Path, help="study file (after surrogate run)")
-    exporting.add_argument("--format", choices=("lsdyna",), default="lsdyna", help="output format")
-    exporting.add_argument("--output", type=Path, help="write the snippet to this file")
-    exporting.add_argument("--storage", help="Optuna storage URL (default: the study's)")
-    exporting.add_argument(
-        "--units",
-        choices=("mm-N-s", "mm-kg-ms", "m-kg-s"),
-        default="mm-N-s",
-        help="unit system of your deck (default mm-N-s: MPa)",
-    )
-    exporting.add_argument("--json", action="store_true", help="print one JSON object")
-    exporting.set_defaults(handler=_export)
-
-    diag = commands.add_parser(
-        "diagnose", help="where the model fails and which physical effect is missing"
-    )
-    diag.add_argument("study", type=Path, help="study file with [measurements]")
-    _model_options(diag)
-    diag.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
-    diag.add_argument(
-        "--jobs", type=int, help="processes for the candidates' refits (default: all CPUs)"
-    )
-    diag.add_argument("--json", action="store_true", help="print one JSON object")
-    diag.set_defaults(handler=_diagnose)
-
-    board = commands.add_parser("dashboard", help="optuna-dashboard of a study, on 127.0.0.1")
-    board.add_argument("study", type=Path, help="study file")
-    board.add_argument("--storage", help="Optuna storage URL (default: SQLite next to the study)")
-    board.add_argument("--port", type=int, default=8080, help="port on 127.0.0.1 (default 8080)")
-    board.set_defaults(handler=_dashboard)
-    _worker_parser(commands)
-    return parser
-
-
-def _model_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--effect",
-        action="append",
-        default=None,
-        metavar="NAME",
-        help="an effect of the model (repeatable; default: the study's [model] effects)",
-    )
-    parser.add_argument(
-        "--plugin",
-        action="append",
-        default=[],
-        metavar="MODULE",
-        help="import a module of your own effects first (repeatable)",
-    )
-
-
-def _calibrate(args: argparse.Namespace) -> int:
-    from .calibration._loop import calibrate
-
-    if args.jobs < 1:
-        raise InputDataError(f"--jobs must be ≥ 1, got {args.jobs}")
-    if args.budget is not None and args.budget < 10:
-        raise InputDataError(f"--budget must be ≥ 10 solver runs, got {args.budget}")
-    result = calibrate(
-        args.study,
-        effects=args.effect,
-        plugins=args.plugin,
-        storage=args.storage,
-        max_solver_calls=args.budget,
-        jobs=args.jobs,
-        progress=not args.json,
-    )
-    if args.json:
-        _print_json(result.to_json())
-        return 0
-    print(result.message)
-    print(
-        "parameters (95 % interval): "
-        + ", ".join(
-            f"{k} = {v:.4g}{_interval(result.determination, k)}" for k, v in result.params.items()
-        )
-    )
-    print(
-        "RMSE per test [N]: " + ", ".join(f"{k} {v:.3g}" for k, v in result.rmse_per_test_n.items())
-    )
-    print(f"study {result.study!r} in {result.storage}")
-    return 0
-
-
-def _interval(determination: dict[str, Any] | None, name: str) -> str:
-    """`` [low, high]`` of a calibrated parameter, or what stands in for it."""
-    if determination is None:
-        return ""
-    if name in determination["held_at_bound"]:
-        return " (held at its bound)"
-    low, high = determination["intervals"][name]
-    return f" [{low:.4g}, {high:.4g}]" + (" free" if name in determination["free"] else "")
-
-
-def _parse_params(text: str | None) -> dict[str, float] | None:
-    if text is None:
-        return None
-    params = {}
-    for pair in filter(None, text.split(",")):
-        key, sep, value = pair.partition("=")
-        try:
-            params[key.strip()] = float(value)
-        except ValueError:
-            sep = ""
-        if not sep:
-            raise InputDataError(
-                f"--params {pair!r}: expected NAME=NUMBER[,NAME=NUMBER], e.g. ecoat_gpa=1.2"
-            )
-    return params
-
-
-def _diagnose(args: argparse.Namespace) -> int:
-    from .calibration._diagnose import diagnose, write_ladder_plot
-    from .study._spec import load_study
-
-    result = diagnose(
-        args.study,
-        effects=args.effect,
-        plugins=args.plugin,
-        storage=args.storage,
-        jobs=args.jobs,
-        progress=not args.json,
-    )
-    spec = load_study(args.study)
-    plot = write_ladder_plot(result.ladder, spec.directory / f"{spec.name}-compare" / "ladder.png")
-    if args.json:
-        _print_json(result.to_json())
-        return 0
-    state = "systematic" if result.systematic else "within the noise"
-    print(
-        f"RMSE {result.rmse_n:.4g} N (held-out {result.heldout_rmse_n:.4g} N), noise "
-        f"{result.noise_n:.4g} N: {state} (p = {result.p_value:.2g})"
-    )
-    for cell in result.where[:6]:
-        print(f"  fails at {cell['kind']} {cell['name']}: RMSE {cell['rmse_n']:.3g} N")
-    follows = [f["covariate"] for f in result.follows if f["significant"]]
-    print("residual follows: " + (", ".join(follows) if follows else "nothing recorded"))
-    print(f"{'added effect':>18} {'RMSE [N]':>9} {'held-out':>9} {'ΔBIC':>8}")
-    for entry in result.ranking:
-        print(
-            f"{entry['effect']:>18} {entry['rmse_n']:9.4f} {entry['heldout_rmse_n']:9.4g} "
-            f"{entry['delta_bic']:8.1f}"
-        )
-    if result.tied_with:
-        tied = ", ".join(result.tied_with)
-        print(f"as good as the first (these data cannot tell them apart): {tied}")
-    print(result.verdict)
-    print("model ladder:")
-    for step in result.ladder:
-        held = step["heldout_rmse_n"]
-        print(
-            f"  {step['model']:>18}: RMSE {step['rmse_n']:.4g} N"
-            + (f", held-out {held:.4g} N" if held is not None else "")
-            + f", {step['solver_calls']} solver calls"
-        )
-    if plot is not None:
-        print(f"plot: {plot}")
-    return 0
-
-
-def _compare(args: argparse.Namespace) -> int:
-    from .calibration._compare import compare
-
-    result = compare(
-        args.study,
-        params=_parse_params(args.params),
-        effects=args.effect,
-        plugins=args.plugin,
-        storage=args.storage,
-        output_dir=args.output,
-        plots=not args.no_plots,
-        progress=False,
-    )
-    if args.json:
-        _print_json(result.to_json())
-        return 0
-    print(result.message)
-    print(f"{'test':>8} {'RMSE [N]':>9} {'bias [N]':>9}")
-    for test in result.tests:
-        print(f"{test['test_id']:>8} {test['rmse_n']:9.4f} {test['bias_n']:+9.4f}")
-    for band in result.bands:
-        print(f"{band['band']:>14}: RMSE {band['rmse_n']:.4f} N over {band['points']} points")
-    if result.covariates:
-        print(
-            "correlation of the tests' mean residual with: "
-            + ", ".join(f"{k} {v:+.2f}" for k, v in result.covariates.items())
-        )
-    for path in result.plots:
-        print(f"plot: {path}")
-    return 0
-
-
-def _worker_parser(commands: Any) -> None:
-    worker = commands.add_parser(
-        "worker", help="run queued verification trials of a study from a shared storage"
-    )
-    worker.add_argument("study", type=Path, help="the planner's study file")
-    worker.add_argument(
-        "--storage",
-        required=True,
-        help="postgresql://user@host/db, journal:///path/study.log (or a .log path), "
-        "or sqlite:///path.db (one worker only)",
-    )
-    worker.add_argument("--jobs", type=int, default=1, help="worker processes here (default 1)")
-    worker.add_argument(
-        "--heartbeat", type=int, default=10, help="heartbeat interval in s (default 10)"
-    )
-    worker.add_argument(
-        "--idle-timeout",
-        type=float,
-        default=60.0,
-        help="s to wait for new trials once none is queued or running (default 60)",
-    )
-    worker.add_argument("--json", action="store_true", help="print one JSON object")
-    worker.set_defaults(handler=_worker)
-
-
-def _worker(args: argparse.Namespace) -> int:
-    from .identify._worker import work
-
-    result = work(
-        args.study,
-        storage=args.storage,
-        jobs=args.jobs,
-        heartbeat_s=args.heartbeat,
-        idle_timeout_s=args.idle_timeout,
-        progress=not args.json,
-    )
-    if args.json:
-        _print_json(result.to_json())
-    else:
-        print(
-            f"{result.runs} runs finished ({result.ok} ok, {result.failed} failed, "
-            f"{result.solved} solved, the rest from the cache) in {result.study!r}"
-        )
-    if result.interrupted in ("SIGTERM", "SIGINT"):
-        return 128 + int(getattr(signal, result.interrupted))
-    return 0
-
-
-def _dashboard(args: argparse.Namespace) -> int:
-    from .storage._serve import dashboard
-
-    try:
-        dashboard(args.study, storage=args.storage, port=args.port)
-    except KeyboardInterrupt:
-        pass
-    return 0
-
-
-def _export(args: argparse.Namespace) -> int:
-    from .identify._export import export
-
-    result = export(
-        args.study, format=args.format, output=args.output, storage=args.storage, units=args.units
-    )
-    if args.json:
-        _print_json(result.to_json())
-    elif args.output is None:
-        print(result.text, end="")
-    else:
-        print(f"verify trial #{result.trial_number} of {result.study} written to {result.output}")
-    return 0
-
-
-def _target(text: str) -> float:
-    name, _, value = text.partition("=")
-    if name != "f60_n" or not value:
-        raise argparse.ArgumentTypeError(f"expected f60_n=VALUE, got {text!r}")
-    try:
-        return float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"f60_n must be a number, got {value!r}") from None
-
-
-def _run(args: argparse.Namespace) -> int:
-    from .identify._loop import run
-
-    result = run(
-        args.study,
-        storage=args.storage,
-        seed=args.seed,
-        target=args.target,
-        budget=args.budget,
-        jobs=args.jobs,
-        progress=not args.json,
-    )
-    if args.json:
-        _print_json(result.to_json())
-        return 0
-    print(result.message)
-    if result.verified is not None:
-        v = result.verified
-        label = "verified optimum" if result.status == "verified" else "best verified point"
-        print(
-            f"{label}: Ecoat {v['ecoat_gpa']:.4g} GPa, Scoat {v['scoat_gpa']:.4g} GPa, "
-            f"Tcoat {v['tcoat_mm']:.4g} mm -> F60 {v['f60_n']:.4g} N, "
-            f"theta_sat {v['theta_sat_deg']:g} deg"
-        )
-    if result.identifiability:
-        print(result.identifiability["statement"])
-    print(f"study {result.study!r} in {result.storage}")
-    return 0
-
-
-def _doe(args: argparse.Namespace) -> int:
-    from .identify._commands import doe
-
-    result = doe(
-        args.design,
-        n=args.n,
-        seed=args.seed,
-        study=args.study,
-        run=args.run,
-        jobs=args.jobs,
-        out=args.out,
-        cache_dir=args.cache,
-        points_file=args.points_file,
-        progress=not args.json and sys.stderr.isatty(),
-    )
-    if args.json:
-        _print_json(result.to_json())
-        return 0
-    print(f"{result.design} design: {result.n_points} points written to {result.out}")
-    if result.ran:
-        print(
-            f"solver runs: {result.n_ok} ok, {result.n_failed} failed; "
-            f"{result.solver_calls} solved now, {result.cached} from the cache"
-        )
-    return 0
-
-
-def _fit(args: argparse.Namespace) -> int:
-    from .gp import cross_validation_table
-    from .identify._commands import fit
-
-    result = fit(args.samples, out=args.out, seed=args.seed)
-    if args.json:
-        _print_json(result.to_json())
-        return 0
-    print(
-        f"fitted on {result.n_train} successful runs"
-        + (f"; model written to {result.model}" if result.model else "")
-    )
-    print(cross_validation_table({"f60_n": result.f60_n, "theta_sat_deg": result.theta_sat_deg}))
-    return 0
-
-
-def _predict(args: argparse.Namespace) -> int:
-    from .identify._commands import predict
-
-    result = predict(args.model, args.points, out=args.out)
-    if args.json:
-        _print_json(result.to_json())
-        return 0
-    for row in result.predictions[:20]:
-        print(", ".join(f"{k}={v:.4g}" for k, v in row.items()))
-    if result.n_points > 20:
-        print(f"… {result.n_points - 20} more")
-    if result.out:
-        print(f"predictions written to {result.out}")
-    return 0
 
 
 def _parse_effects(items: list[str]) -> dict[str, dict[str, float]]:
@@ -617,32 +233,6 @@ def _parse_solver_options(items: list[str]) -> dict[str, object]:
     return options
 
 
-def _simulate(args: argparse.Namespace) -> int:
-    from .effects import load_plugin
-
-    for module in args.plugin:
-        load_plugin(module)
-    curve = simulate(
-        args.ecoat,
-        args.scoat,
-        args.tcoat,
-        rig=_rig_from(args),
-        effects=_parse_effects(args.effect),
-        conditions=_parse_conditions(args.condition),
-        solver=args.solver,
-        solver_settings=_parse_solver_options(args.solver_option),
-    )
-    if args.out is not None:
-        atomic_write_text(args.out, _curve_csv(curve))
-    if args.json:
-        _print_json(curve.to_json())
-    else:
-        print(_curve_table(curve))
-        if args.out is not None:
-            print(f"curve written to {args.out}")
-    return 0
-
-
 def _curve_csv(curve: BendingCurve) -> str:
     rows = ["angle_deg,force_n,force_perp_n"]
     rows += [
@@ -666,14 +256,530 @@ def _curve_table(curve: BendingCurve) -> str:
     return "\n".join(lines)
 
 
-def _print_json(payload: Any) -> None:
-    print(json.dumps(payload, allow_nan=True))
+# surrogate doe -------------------------------------------------------------------------
+
+
+def _add_doe(commands: _Subparsers) -> argparse.ArgumentParser:
+    design = commands.add_parser("doe", help="make a design of experiments, optionally run it")
+    design.add_argument(
+        "--design",
+        choices=DESIGNS,
+        default="lhs",
+        help="factorial (--n levels per parameter), lhs, sobol, or paper "
+        "(the paper's 64 Table-1 cases)",
+    )
+    design.add_argument("--n", type=int, default=16, help="points (levels for factorial)")
+    design.add_argument("--seed", type=int, default=None, help="seed (default: the study's, or 0)")
+    design.add_argument("--study", type=Path, help="take ranges and rig from this study file")
+    design.add_argument(
+        "--from",
+        dest="points_file",
+        type=Path,
+        help="take the points from this CSV instead (parameter columns)",
+    )
+    design.add_argument("--run", action="store_true", help="run the full solver on the design")
+    design.add_argument("--jobs", type=int, default=1, help="worker processes for --run")
+    design.add_argument(
+        "--cache",
+        type=Path,
+        default=None,
+        help="result cache folder (default: .solver-cache next to --out)",
+    )
+    design.add_argument("--out", type=Path, required=True, help="CSV to write")
+    _add_json(design)
+    return design
+
+
+def _doe(args: argparse.Namespace) -> int:
+    from .identify._commands import doe
+
+    result = doe(
+        args.design,
+        n=args.n,
+        seed=args.seed,
+        study=args.study,
+        run=args.run,
+        jobs=args.jobs,
+        out=args.out,
+        cache_dir=args.cache,
+        points_file=args.points_file,
+        progress=not args.json and sys.stderr.isatty(),
+    )
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(f"{result.design} design: {result.n_points} points written to {result.out}")
+    if result.ran:
+        print(
+            f"solver runs: {result.n_ok} ok, {result.n_failed} failed; "
+            f"{result.solver_calls} solved now, {result.cached} from the cache"
+        )
+    return 0
+
+
+# surrogate fit -------------------------------------------------------------------------
+
+
+def _add_fit(commands: _Subparsers) -> argparse.ArgumentParser:
+    fitting = commands.add_parser("fit", help="fit the GP surrogates to a sample set")
+    fitting.add_argument("samples", type=Path, help="sample set CSV (from doe --run)")
+    fitting.add_argument("--out", type=Path, help="model JSON to write")
+    fitting.add_argument("--seed", type=int, default=0, help="seed of the optimiser restarts")
+    _add_json(fitting)
+    return fitting
+
+
+def _fit(args: argparse.Namespace) -> int:
+    from .gp import cross_validation_table
+    from .identify._commands import fit
+
+    result = fit(args.samples, out=args.out, seed=args.seed)
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(
+        f"fitted on {result.n_train} successful runs"
+        + (f"; model written to {result.model}" if result.model else "")
+    )
+    print(cross_validation_table({"f60_n": result.f60_n, "theta_sat_deg": result.theta_sat_deg}))
+    return 0
+
+
+# surrogate predict ---------------------------------------------------------------------
+
+
+def _add_predict(commands: _Subparsers) -> argparse.ArgumentParser:
+    prediction = commands.add_parser("predict", help="predict F60 and theta_sat at points")
+    prediction.add_argument("model", type=Path, help="model JSON (from fit)")
+    prediction.add_argument("points", type=Path, help="CSV with the parameter columns")
+    prediction.add_argument("--out", type=Path, help="CSV to write (points + predictions)")
+    _add_json(prediction)
+    return prediction
+
+
+def _predict(args: argparse.Namespace) -> int:
+    from .identify._commands import predict
+
+    result = predict(args.model, args.points, out=args.out)
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    for row in result.predictions[:20]:
+        print(", ".join(f"{k}={v:.4g}" for k, v in row.items()))
+    if result.n_points > 20:
+        print(f"… {result.n_points - 20} more")
+    if result.out:
+        print(f"predictions written to {result.out}")
+    return 0
+
+
+# surrogate run -------------------------------------------------------------------------
+
+
+def _add_run(commands: _Subparsers) -> argparse.ArgumentParser:
+    running = commands.add_parser(
+        "run", help="the main job: find the coating that meets the study's target"
+    )
+    running.add_argument("study", type=Path, help="study file (studies/*.toml)")
+    _add_storage(running)
+    running.add_argument("--seed", type=int, help="override [study] seed")
+    running.add_argument("--target", type=_target, help="override the target: f60_n=VALUE")
+    running.add_argument("--budget", type=int, help="override [budget] max_solver_calls")
+    running.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="N local worker processes verify through the storage (journal or PostgreSQL); "
+        "0: queue the runs for `surrogate worker` processes elsewhere (default 1)",
+    )
+    _add_json(running)
+    return running
+
+
+def _run(args: argparse.Namespace) -> int:
+    from .identify._loop import run
+
+    result = run(
+        args.study,
+        storage=args.storage,
+        seed=args.seed,
+        target=args.target,
+        budget=args.budget,
+        jobs=args.jobs,
+        progress=not args.json,
+    )
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(result.message)
+    if result.verified is not None:
+        v = result.verified
+        label = "verified optimum" if result.status == "verified" else "best verified point"
+        print(
+            f"{label}: Ecoat {v['ecoat_gpa']:.4g} GPa, Scoat {v['scoat_gpa']:.4g} GPa, "
+            f"Tcoat {v['tcoat_mm']:.4g} mm -> F60 {v['f60_n']:.4g} N, "
+            f"theta_sat {v['theta_sat_deg']:g} deg"
+        )
+    if result.identifiability:
+        print(result.identifiability["statement"])
+    print(f"study {result.study!r} in {result.storage}")
+    return 0
+
+
+def _target(text: str) -> float:
+    name, _, value = text.partition("=")
+    if name != "f60_n" or not value:
+        raise argparse.ArgumentTypeError(f"expected f60_n=VALUE, got {text!r}")
+    try:
+        return float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"f60_n must be a number, got {value!r}") from None
+
+
+# surrogate calibrate -------------------------------------------------------------------
+
+
+def _add_calibrate(commands: _Subparsers) -> argparse.ArgumentParser:
+    cal = commands.add_parser(
+        "calibrate", help="fit the coating and the model's effects to the measured curves"
+    )
+    cal.add_argument("study", type=Path, help="study file with [measurements]")
+    _add_model_options(cal)
+    _add_storage(cal)
+    cal.add_argument(
+        "--budget", type=int, help="override [budget] calibration_solver_calls (full-solver runs)"
+    )
+    cal.add_argument("--jobs", type=int, default=1, help="solver processes per verification")
+    _add_json(cal)
+    return cal
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    from .calibration._loop import calibrate
+
+    if args.jobs < 1:
+        raise InputDataError(f"--jobs must be ≥ 1, got {args.jobs}")
+    if args.budget is not None and args.budget < 10:
+        raise InputDataError(f"--budget must be ≥ 10 solver runs, got {args.budget}")
+    result = calibrate(
+        args.study,
+        effects=args.effect,
+        plugins=args.plugin,
+        storage=args.storage,
+        max_solver_calls=args.budget,
+        jobs=args.jobs,
+        progress=not args.json,
+    )
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(result.message)
+    print(
+        "parameters (95 % interval): "
+        + ", ".join(
+            f"{k} = {v:.4g}{_interval(result.determination, k)}" for k, v in result.params.items()
+        )
+    )
+    print(
+        "RMSE per test [N]: " + ", ".join(f"{k} {v:.3g}" for k, v in result.rmse_per_test_n.items())
+    )
+    print(f"study {result.study!r} in {result.storage}")
+    return 0
+
+
+def _interval(determination: dict[str, Any] | None, name: str) -> str:
+    """`` [low, high]`` of a calibrated parameter, or what stands in for it."""
+    if determination is None:
+        return ""
+    if name in determination["held_at_bound"]:
+        return " (held at its bound)"
+    low, high = determination["intervals"][name]
+    return f" [{low:.4g}, {high:.4g}]" + (" free" if name in determination["free"] else "")
+
+
+# surrogate compare ---------------------------------------------------------------------
+
+
+def _add_compare(commands: _Subparsers) -> argparse.ArgumentParser:
+    comp = commands.add_parser(
+        "compare", help="measured vs model curves: residuals per test, angle band, covariate"
+    )
+    comp.add_argument("study", type=Path, help="study file with [measurements]")
+    _add_model_options(comp)
+    comp.add_argument(
+        "--params",
+        help="parameters to compare, e.g. ecoat_gpa=1.2,scoat_gpa=0.15,tcoat_mm=0.02 "
+        "(default: the last calibration of this model)",
+    )
+    _add_storage(comp)
+    comp.add_argument("--output", type=Path, help="folder of the PNG plots")
+    comp.add_argument("--no-plots", action="store_true", help="write no PNG files")
+    _add_json(comp)
+    return comp
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from .calibration._compare import compare
+
+    result = compare(
+        args.study,
+        params=_parse_params(args.params),
+        effects=args.effect,
+        plugins=args.plugin,
+        storage=args.storage,
+        output_dir=args.output,
+        plots=not args.no_plots,
+        progress=False,
+    )
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(result.message)
+    print(f"{'test':>8} {'RMSE [N]':>9} {'bias [N]':>9}")
+    for test in result.tests:
+        print(f"{test['test_id']:>8} {test['rmse_n']:9.4f} {test['bias_n']:+9.4f}")
+    for band in result.bands:
+        print(f"{band['band']:>14}: RMSE {band['rmse_n']:.4f} N over {band['points']} points")
+    if result.covariates:
+        print(
+            "correlation of the tests' mean residual with: "
+            + ", ".join(f"{k} {v:+.2f}" for k, v in result.covariates.items())
+        )
+    for path in result.plots:
+        print(f"plot: {path}")
+    return 0
+
+
+def _parse_params(text: str | None) -> dict[str, float] | None:
+    if text is None:
+        return None
+    params = {}
+    for pair in filter(None, text.split(",")):
+        key, sep, value = pair.partition("=")
+        try:
+            params[key.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep:
+            raise InputDataError(
+                f"--params {pair!r}: expected NAME=NUMBER[,NAME=NUMBER], e.g. ecoat_gpa=1.2"
+            )
+    return params
+
+
+# surrogate export ----------------------------------------------------------------------
+
+
+def _add_export(commands: _Subparsers) -> argparse.ArgumentParser:
+    exporting = commands.add_parser(
+        "export", help="the verified optimum of a study as LS-DYNA keyword text"
+    )
+    exporting.add_argument("study", type=Path, help="study file (after surrogate run)")
+    exporting.add_argument("--format", choices=("lsdyna",), default="lsdyna", help="output format")
+    exporting.add_argument("--output", type=Path, help="write the snippet to this file")
+    _add_storage(exporting, help="Optuna storage URL (default: the study's)")
+    exporting.add_argument(
+        "--units",
+        choices=("mm-N-s", "mm-kg-ms", "m-kg-s"),
+        default="mm-N-s",
+        help="unit system of your deck (default mm-N-s: MPa)",
+    )
+    _add_json(exporting)
+    return exporting
+
+
+def _export(args: argparse.Namespace) -> int:
+    from .identify._export import export
+
+    result = export(
+        args.study, format=args.format, output=args.output, storage=args.storage, units=args.units
+    )
+    if args.json:
+        _print_json(result.to_json())
+    elif args.output is None:
+        print(result.text, end="")
+    else:
+        print(f"verify trial #{result.trial_number} of {result.study} written to {result.output}")
+    return 0
+
+
+# surrogate diagnose --------------------------------------------------------------------
+
+
+def _add_diagnose(commands: _Subparsers) -> argparse.ArgumentParser:
+    diag = commands.add_parser(
+        "diagnose", help="where the model fails and which physical effect is missing"
+    )
+    diag.add_argument("study", type=Path, help="study file with [measurements]")
+    _add_model_options(diag)
+    _add_storage(diag)
+    diag.add_argument(
+        "--jobs", type=int, help="processes for the candidates' refits (default: all CPUs)"
+    )
+    _add_json(diag)
+    return diag
+
+
+def _diagnose(args: argparse.Namespace) -> int:
+    from .calibration._diagnose import diagnose, write_ladder_plot
+    from .study._spec import load_study
+
+    result = diagnose(
+        args.study,
+        effects=args.effect,
+        plugins=args.plugin,
+        storage=args.storage,
+        jobs=args.jobs,
+        progress=not args.json,
+    )
+    spec = load_study(args.study)
+    plot = write_ladder_plot(result.ladder, spec.directory / f"{spec.name}-compare" / "ladder.png")
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    _print_diagnosis(result)
+    if plot is not None:
+        print(f"plot: {plot}")
+    return 0
+
+
+def _print_diagnosis(result: Any) -> None:
+    """The text report of a ``DiagnosisResult``: noise test, where, ranking, ladder."""
+    state = "systematic" if result.systematic else "within the noise"
+    print(
+        f"RMSE {result.rmse_n:.4g} N (held-out {result.heldout_rmse_n:.4g} N), noise "
+        f"{result.noise_n:.4g} N: {state} (p = {result.p_value:.2g})"
+    )
+    for cell in result.where[:6]:
+        print(f"  fails at {cell['kind']} {cell['name']}: RMSE {cell['rmse_n']:.3g} N")
+    follows = [f["covariate"] for f in result.follows if f["significant"]]
+    print("residual follows: " + (", ".join(follows) if follows else "nothing recorded"))
+    print(f"{'added effect':>18} {'RMSE [N]':>9} {'held-out':>9} {'ΔBIC':>8}")
+    for entry in result.ranking:
+        print(
+            f"{entry['effect']:>18} {entry['rmse_n']:9.4f} {entry['heldout_rmse_n']:9.4g} "
+            f"{entry['delta_bic']:8.1f}"
+        )
+    if result.tied_with:
+        tied = ", ".join(result.tied_with)
+        print(f"as good as the first (these data cannot tell them apart): {tied}")
+    print(result.verdict)
+    print("model ladder:")
+    for step in result.ladder:
+        held = step["heldout_rmse_n"]
+        print(
+            f"  {step['model']:>18}: RMSE {step['rmse_n']:.4g} N"
+            + (f", held-out {held:.4g} N" if held is not None else "")
+            + f", {step['solver_calls']} solver calls"
+        )
+
+
+# surrogate dashboard -------------------------------------------------------------------
+
+
+def _add_dashboard(commands: _Subparsers) -> argparse.ArgumentParser:
+    board = commands.add_parser("dashboard", help="optuna-dashboard of a study, on 127.0.0.1")
+    board.add_argument("study", type=Path, help="study file")
+    _add_storage(board)
+    board.add_argument("--port", type=int, default=8080, help="port on 127.0.0.1 (default 8080)")
+    return board
+
+
+def _dashboard(args: argparse.Namespace) -> int:
+    from .storage._serve import dashboard
+
+    try:
+        dashboard(args.study, storage=args.storage, port=args.port)
+    except KeyboardInterrupt:
+        pass
+    return 0
+
+
+# surrogate worker ----------------------------------------------------------------------
+
+
+def _add_worker(commands: _Subparsers) -> argparse.ArgumentParser:
+    worker = commands.add_parser(
+        "worker", help="run queued verification trials of a study from a shared storage"
+    )
+    worker.add_argument("study", type=Path, help="the planner's study file")
+    _add_storage(
+        worker,
+        help="postgresql://user@host/db, journal:///path/study.log (or a .log path), "
+        "or sqlite:///path.db (one worker only)",
+        required=True,
+    )
+    worker.add_argument("--jobs", type=int, default=1, help="worker processes here (default 1)")
+    worker.add_argument(
+        "--heartbeat", type=int, default=10, help="heartbeat interval in s (default 10)"
+    )
+    worker.add_argument(
+        "--idle-timeout",
+        type=float,
+        default=60.0,
+        help="s to wait for new trials once none is queued or running (default 60)",
+    )
+    _add_json(worker)
+    return worker
+
+
+def _worker(args: argparse.Namespace) -> int:
+    from .identify._worker import work
+
+    result = work(
+        args.study,
+        storage=args.storage,
+        jobs=args.jobs,
+        heartbeat_s=args.heartbeat,
+        idle_timeout_s=args.idle_timeout,
+        progress=not args.json,
+    )
+    if args.json:
+        _print_json(result.to_json())
+    else:
+        print(
+            f"{result.runs} runs finished ({result.ok} ok, {result.failed} failed, "
+            f"{result.solved} solved, the rest from the cache) in {result.study!r}"
+        )
+    if result.interrupted in ("SIGTERM", "SIGINT"):
+        return 128 + int(getattr(signal, result.interrupted))
+    return 0
+
+
+# The command line ----------------------------------------------------------------------
+
+_COMMANDS: tuple[tuple[Callable[[_Subparsers], argparse.ArgumentParser], _Handler], ...] = (
+    (_add_simulate, _simulate),
+    (_add_doe, _doe),
+    (_add_fit, _fit),
+    (_add_predict, _predict),
+    (_add_run, _run),
+    (_add_calibrate, _calibrate),
+    (_add_compare, _compare),
+    (_add_export, _export),
+    (_add_diagnose, _diagnose),
+    (_add_dashboard, _dashboard),
+    (_add_worker, _worker),
+)
+"""(declare the arguments, handle the command) per command, in the order of ``--help``."""
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = _OneLineParser(
+        prog="surrogate",
+        description="Identify the coating of seat-belt webbing from 2-point bending tests.",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=_OneLineParser)
+    for add, handler in _COMMANDS:
+        add(commands).set_defaults(handler=handler)
+    return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``surrogate`` command; returns the exit code."""
     parser = _build_parser()
     args = parser.parse_args(argv)
+    show_progress()
     try:
         return int(args.handler(args))
     except InputDataError as error:

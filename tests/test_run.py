@@ -10,7 +10,7 @@ import optuna
 import pytest
 
 import surrogate
-import surrogate.identify._loop as run_module
+import surrogate.identify._verify as verify_module
 from surrogate import InputDataError, load_study
 from surrogate.identify._loop import run
 from tests.conftest import CountingSolve
@@ -56,7 +56,7 @@ def test_verified_point_resimulated_meets_target_and_constraints(study_file):
 
 
 def test_interrupted_run_resumes_without_repeating(study_file, monkeypatch):
-    monkeypatch.setattr(run_module, "solve_inputs", CountingSolve(stop_after=6))
+    monkeypatch.setattr(verify_module, "solve_inputs", CountingSolve(stop_after=6))
     with pytest.raises(KeyboardInterrupt):
         run(study_file, progress=False)
     storage = load_study(study_file).default_storage()
@@ -69,7 +69,7 @@ def test_interrupted_run_resumes_without_repeating(study_file, monkeypatch):
     assert len(done) == 6
     shutil.rmtree(study_file.parent / ".solver-cache")  # only the storage remembers now
     second = CountingSolve()
-    monkeypatch.setattr(run_module, "solve_inputs", second)
+    monkeypatch.setattr(verify_module, "solve_inputs", second)
     result = run(study_file, progress=False)
     assert result.status == "verified"
     assert second.calls == result.solver_calls - 6

@@ -101,14 +101,7 @@ def doe(
         raise InputDataError(f"output folder {out.parent} does not exist; create it first")
     if points_file is not None:
         design = "file"
-        points = read_points(points_file, space.names)
-        outside = [n for n in space.names if not np.all(space[n].contains(points[n]))]
-        if outside:
-            raise InputDataError(
-                f"{points_file}: column {outside[0]} has values outside "
-                f"[{space[outside[0]].low:g}, {space[outside[0]].high:g}]; "
-                "fix them or widen the study's range"
-            )
+        points = _read_design(points_file, space)
     else:
         points = make_design(design, space, n=n, seed=seed)
     if not run:
@@ -129,17 +122,27 @@ def doe(
         meta={"design": design, "seed": seed},
     )
     samples.write(out)
+    return _ran(design, len(points), out, samples)
+
+
+def _ran(design: str, n_points: int, out: Path, samples: SampleSet) -> DoeResult:
     calls = int(samples.meta["solver_calls"])
     return DoeResult(
-        design,
-        len(points),
-        str(out),
-        True,
-        len(samples.ok),
-        samples.n_failed,
-        calls,
-        len(points) - calls,
+        design, n_points, str(out), True, len(samples.ok), samples.n_failed, calls, n_points - calls
     )
+
+
+def _read_design(points_file: str | Path, space: ParameterSpace) -> pd.DataFrame:
+    """A design of one's own: the parameter columns of a CSV, every value in its range."""
+    points = read_points(points_file, space.names)
+    outside = [n for n in space.names if not np.all(space[n].contains(points[n]))]
+    if outside:
+        raise InputDataError(
+            f"{points_file}: column {outside[0]} has values outside "
+            f"[{space[outside[0]].low:g}, {space[outside[0]].high:g}]; "
+            "fix them or widen the study's range"
+        )
+    return points
 
 
 def fit_surrogate(samples: SampleSet, *, seed: int = 0) -> CoatingSurrogate:

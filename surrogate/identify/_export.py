@@ -112,9 +112,10 @@ def export(
 def _verified_optimum(spec: StudySpec, url: str) -> tuple[dict[str, Any], str]:
     import optuna
 
-    from ._loop import _quiet_optuna, _Verifier, verify_study_name
+    from ..storage._optuna import quiet_optuna
+    from ._verify import Verifier, verify_study_name
 
-    _quiet_optuna()
+    quiet_optuna()
     name = verify_study_name(spec)
     if url.startswith("sqlite:///") and not Path(url.removeprefix("sqlite:///")).exists():
         raise InputDataError(f"storage {url} does not exist; run `surrogate run` first")
@@ -124,7 +125,7 @@ def _verified_optimum(spec: StudySpec, url: str) -> tuple[dict[str, Any], str]:
         raise InputDataError(
             f"no study {name!r} in {url}; run `surrogate run` on the study file first"
         ) from None
-    chosen = _Verifier(spec, study, progress=False).chosen()
+    chosen = Verifier(spec, study, progress=False).chosen()
     if chosen is None:
         raise InputDataError(
             f"no verified point of {name!r} meets the target and every constraint yet; "

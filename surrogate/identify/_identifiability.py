@@ -68,35 +68,11 @@ def assess_identifiability(
         to the surrogate's, which is noisy when the surrogate has few points.
     """
     log_chosen = np.log(np.asarray(chosen, dtype=float))
-    sites = (
-        np.vstack([log_chosen, np.log(np.atleast_2d(equally_good))])
-        if len(equally_good)
-        else log_chosen[None, :]
-    )
-    if solver_gradient is not None:
-        mean = np.asarray(solver_gradient, dtype=float)
-        scale = float(np.max(np.abs(mean))) or 1.0
-    else:
-        # Average the surrogate's local exponents over the equally good set:
-        # one point's gradient of a sparse surrogate is noisy, the set's mean less so.
-        gradients = _log_gradients(log_f60, sites)
-        scales = np.max(np.abs(gradients), axis=1, keepdims=True)
-        mean = np.mean(gradients / np.where(scales > 0, scales, 1.0), axis=0)
-        scale = float(np.median(scales))
-    exponents = mean / (float(np.max(np.abs(mean))) or 1.0)
+    exponents, scale = _exponents(log_f60, log_chosen, equally_good, solver_gradient)
     shown = [k for k in np.argsort(-np.abs(exponents)) if abs(exponents[k]) >= _SHOWN_EXPONENT]
     combination = " · ".join(f"{_LABELS.get(names[k], names[k])}^{exponents[k]:.2f}" for k in shown)
     value = float(np.exp(exponents @ log_chosen))
-    if len(equally_good):
-        points = np.atleast_2d(equally_good)
-        combos = np.log(np.atleast_2d(equally_good)) @ exponents
-        spread = float(np.exp((combos.max() - combos.min()) / 2.0) - 1.0)
-        ranges = {
-            n: [float(points[:, k].min()), float(points[:, k].max())] for k, n in enumerate(names)
-        }
-    else:
-        spread = float("nan")
-        ranges = {n: [float(chosen[k]), float(chosen[k])] for k, n in enumerate(names)}
+    spread, ranges = _equally_good_set(names, chosen, equally_good, exponents)
     # F60 within ±tolerance fixes the combination to ±tolerance / max|a|; the
     # predicted equally good set also shows the surrogate's own scatter.
     uncertainty = tolerance / scale
@@ -121,6 +97,46 @@ def assess_identifiability(
         chosen_by=list(preference_order),
         statement=statement,
     )
+
+
+def _exponents(
+    log_f60: Callable[[np.ndarray], np.ndarray],
+    log_chosen: np.ndarray,
+    equally_good: np.ndarray,
+    solver_gradient: np.ndarray | None,
+) -> tuple[np.ndarray, float]:
+    """The exponents ``a_k`` scaled to max |a| = 1, and the scale max |∂ log F60 / ∂ log p|."""
+    if solver_gradient is not None:
+        mean = np.asarray(solver_gradient, dtype=float)
+        scale = float(np.max(np.abs(mean))) or 1.0
+    else:
+        # Average the surrogate's local exponents over the equally good set:
+        # one point's gradient of a sparse surrogate is noisy, the set's mean less so.
+        sites = (
+            np.vstack([log_chosen, np.log(np.atleast_2d(equally_good))])
+            if len(equally_good)
+            else log_chosen[None, :]
+        )
+        gradients = _log_gradients(log_f60, sites)
+        scales = np.max(np.abs(gradients), axis=1, keepdims=True)
+        mean = np.mean(gradients / np.where(scales > 0, scales, 1.0), axis=0)
+        scale = float(np.median(scales))
+    return mean / (float(np.max(np.abs(mean))) or 1.0), scale
+
+
+def _equally_good_set(
+    names: Sequence[str], chosen: np.ndarray, equally_good: np.ndarray, exponents: np.ndarray
+) -> tuple[float, dict[str, list[float]]]:
+    """The relative spread of the combination over the equally good set, and its ranges."""
+    if not len(equally_good):
+        return float("nan"), {n: [float(chosen[k]), float(chosen[k])] for k, n in enumerate(names)}
+    points = np.atleast_2d(equally_good)
+    combos = np.log(points) @ exponents
+    spread = float(np.exp((combos.max() - combos.min()) / 2.0) - 1.0)
+    ranges = {
+        n: [float(points[:, k].min()), float(points[:, k].max())] for k, n in enumerate(names)
+    }
+    return spread, ranges
 
 
 def _log_gradients(

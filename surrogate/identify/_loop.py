@@ -10,10 +10,6 @@ in-memory Optuna study per iteration.
 from __future__ import annotations
 
 import dataclasses
-import logging
-import sys
-import warnings
-from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -24,20 +20,21 @@ import pandas as pd
 from scipy.stats import norm
 
 from .._errors import InputDataError
-from ..solvers._batch import solve_inputs, solver_inputs
-from ..solvers._cache import ResultCache, input_hash
+from .._log import show_progress
+from ..effects import get_effect
 from ..storage._dashboard import attach_run_report
+from ..storage._optuna import distributions
 from ..storage._storage import check_workers
-from ..study._samples import SampleSet
 from ..study._spec import StudySpec, Targets, load_study
 from ._commands import fit_surrogate
 from ._doe import make_design
 from ._identifiability import assess_identifiability
-from ._objective import constraint_values, is_feasible, meets_target, relative_misfit
+from ._objective import constraint_values, is_feasible, relative_misfit
+from ._verify import Verifier, open_verify_study, target_of, verify_study_name
+from ._worker import HEARTBEAT_S, WorkerDispatcher
 
-__all__ = ["RunResult", "run", "tell_verification", "verify_study_name"]
+__all__ = ["RunResult", "run"]
 
-METRIC = "f60_relative_misfit"
 THETA_MARGIN_SIGMA = 1.645  # one-sided 95 % margin on the predicted θsat
 _SEARCH_BATCH = 10
 
@@ -67,22 +64,6 @@ class RunResult:
         return asdict(self)
 
 
-def verify_study_name(spec: StudySpec) -> str:
-    return f"{spec.name}/verify"
-
-
-def _target_of(spec: StudySpec) -> float:
-    target = spec.targets.f60_n
-    assert target is not None  # checked by _with_overrides
-    return target
-
-
-def _distributions(spec: StudySpec) -> dict[str, optuna.distributions.BaseDistribution]:
-    return {
-        p.name: optuna.distributions.FloatDistribution(p.low, p.high, log=p.log) for p in spec.space
-    }
-
-
 def run(
     study: str | Path | StudySpec,
     *,
@@ -109,29 +90,39 @@ def run(
         batch through the storage (not SQLite); 0: queue each batch and wait for
         ``surrogate worker`` processes elsewhere.
     progress : bool
-        Report each iteration on stderr.
+        Report each iteration (logger ``surrogate``, on stderr unless configured).
     """
-    from ._worker import HEARTBEAT_S, WorkerDispatcher, open_planner_study
-
     spec = _with_overrides(study, seed=seed, target=target, budget=budget)
     storage_url = storage or spec.default_storage()
     check_workers(storage_url, jobs)
-    _quiet_optuna()
+    if progress:
+        show_progress()
     heartbeat_s = None if jobs == 1 else HEARTBEAT_S
-    verifier = _Verifier(
-        spec, open_planner_study(spec, storage_url, heartbeat_s=heartbeat_s), progress=progress
+    verifier = Verifier(
+        spec,
+        open_verify_study(spec, storage_url, heartbeat_s=heartbeat_s),
+        progress=progress,
+        dispatch=None
+        if jobs == 1
+        else WorkerDispatcher(spec, storage_url, jobs=jobs, progress=progress),
     )
-    if jobs != 1:
-        verifier.dispatch = WorkerDispatcher(spec, storage_url, jobs=jobs, progress=progress)
+    iterations = _search_and_verify(spec, verifier)
+    calls_to_verify = verifier.calls if verifier.chosen() is not None else None
+    return _result(spec, verifier, storage_url, iterations, calls_to_verify)
+
+
+def _search_and_verify(spec: StudySpec, verifier: Verifier) -> int:
+    """The loop: an initial design, then surrogate → search → verification until a
+    verified point meets the target or the budget is spent; returns the iterations."""
     initial = make_design("lhs", spec.space, n=spec.budget.initial_samples, seed=spec.seed)
     verifier.verify(initial[list(spec.space.names)].to_numpy(), phase="initial design")
-    iteration, last_model = 0, None
+    iteration = 0
     while verifier.chosen() is None and verifier.calls < spec.budget.max_solver_calls:
         iteration += 1
-        last_model = fit_surrogate(verifier.sample_set(), seed=spec.seed)
+        model = fit_surrogate(verifier.sample_set(), seed=spec.seed)
         room = spec.budget.max_solver_calls - verifier.calls
         candidates = _propose(
-            last_model,
+            model,
             spec,
             verifier.points(),
             iteration,
@@ -140,11 +131,10 @@ def run(
         if len(candidates) == 0:
             break
         verifier.verify(candidates, phase=f"iteration {iteration}")
-    calls_to_verify = verifier.calls if verifier.chosen() is not None else None
-    return _result(spec, verifier, storage_url, iteration, calls_to_verify)
+    return iteration
 
 
-# -- the verify study ------------------------------------------------------------------------
+# -- the study file and its overrides ----------------------------------------------------------
 def _with_overrides(
     study: str | Path | StudySpec, *, seed: int | None, target: float | None, budget: int | None
 ) -> StudySpec:
@@ -172,279 +162,28 @@ def _with_overrides(
             "surrogate run needs [targets] f60_n (or --target f60_n=VALUE); "
             "measured curves are calibrated with surrogate calibrate"
         )
+    refuse_model_effects(spec, "surrogate run")
     return spec
 
 
-def _quiet_optuna() -> None:
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
-    logging.getLogger("optuna").setLevel(logging.WARNING)
-    # metric names are "experimental" since Optuna 3.2 and stable in use
-    warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning)
-
-
-def _open_study(spec: StudySpec, storage_url: str) -> optuna.Study:
-    study = optuna.create_study(
-        storage=storage_url,
-        study_name=verify_study_name(spec),
-        direction="minimize",
-        load_if_exists=True,
-    )
-    study.set_metric_names([METRIC])
-    target = _target_of(spec)
-    attrs = {
-        "description": "full-solver verification runs of a coating identification "
-        "(surrogate run); value = |F60/target - 1|, constraints <= 0 feasible",
-        "objective": f"{METRIC} = |F60 / target - 1|",
-        "target_f60_n": target,
-        "tolerance": spec.targets.tolerance,
-        "constraints": [
-            "theta_sat_min: theta_min - theta_sat [deg]",
-            "tcoat_max: Tcoat - fraction*t [mm]",
-        ],
-        "parameters": spec.space.to_dict(),
-        "solver": spec.solver,
-        "rig": spec.rig.to_dict(),
-    }
-    for key, value in attrs.items():
-        if study.user_attrs.get(key) != value:
-            study.set_user_attr(key, value)
-    return study
-
-
-class _Verifier:
-    """Runs points with the full solver as trials of the verify study; resumes."""
-
-    def __init__(self, spec: StudySpec, study: optuna.Study, *, progress: bool) -> None:
-        self.spec = spec
-        self.study = study
-        self.progress = progress
-        self.cache = ResultCache(spec.directory / ".solver-cache")
-        self.names = list(spec.space.names)
-        self.distributions = _distributions(spec)
-        self.records: dict[str, dict[str, Any]] = {}
-        # set by run(jobs != 1): verify batches through the storage's workers
-        self.dispatch: Callable[[optuna.Study, list[dict[str, float]], str], dict] | None = None
-        for trial in study.get_trials(
-            deepcopy=False, states=(optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.FAIL)
-        ):
-            key = trial.user_attrs.get("input_hash")
-            # a FAIL without a reason is an interrupted worker's run; its retry counts
-            if key is not None and (trial.values or "reason" in trial.user_attrs):
-                self.records[key] = _record_of(trial)
-
-    @property
-    def calls(self) -> int:
-        return len(self.records)
-
-    def points(self) -> np.ndarray:
-        return np.array([[r["params"][n] for n in self.names] for r in self.records.values()])
-
-    def verify(self, points: np.ndarray, *, phase: str) -> None:
-        if self.dispatch is not None:
-            room = self.spec.budget.max_solver_calls - self.calls
-            batch = [
-                dict(zip(self.names, map(float, p), strict=True)) for p in np.atleast_2d(points)
-            ]
-            self.records.update(self.dispatch(self.study, batch[: max(room, 0)], phase))
-        for point in np.atleast_2d(points):
-            if self.calls >= self.spec.budget.max_solver_calls:
-                return
-            self._solve(dict(zip(self.names, map(float, point), strict=True)), phase=phase)
-        self._report(phase)
-
-    def _tell(
-        self, params: dict[str, float], key: str, result: dict[str, Any], phase: str
-    ) -> dict[str, Any]:
-        self.study.enqueue_trial(params, skip_if_exists=False)
-        trial = self.study.ask(self.distributions)
-        trial.set_user_attr("input_hash", key)
-        trial.set_user_attr("phase", phase)
-        return tell_verification(self.study, trial, self.spec, params, result)
-
-    def sensitivities(self, point: dict[str, Any]) -> np.ndarray | None:
-        """``∂ log F60 / ∂ log p`` at a verified point, by forward differences of
-        the full solver (one run per parameter, +5 % each); None if the budget
-        allows none (``[budget] identifiability_runs``)."""
-        if self.spec.budget.identifiability_runs < len(self.names):
-            return None
-        step = np.log(1.05)
-        gradient = np.empty(len(self.names))
-        for k, name in enumerate(self.names):
-            spec = self.spec.space[name]
-            direction = 1.0 if point["params"][name] * 1.05 <= spec.high else -1.0
-            shifted = {**point["params"], name: point["params"][name] * np.exp(direction * step)}
-            record = self._solve(shifted, phase="identifiability")
-            if record["status"] != "ok":
-                return None
-            gradient[k] = direction * np.log(record["f60_n"] / point["f60_n"]) / step
-        return gradient
-
-    def _solve(self, params: dict[str, float], *, phase: str) -> dict[str, Any]:
-        """One full-solver run as a trial; a finished run is never repeated."""
-        inputs = solver_inputs(
-            params,
-            self.spec.rig,
-            solver=self.spec.solver,
-            solver_settings=self.spec.solver_settings,
+def refuse_model_effects(spec: StudySpec, command: str) -> None:
+    """The main job identifies the bare coating: a study with ``[model] effects`` is
+    refused in one line (an unknown name first, as every command refuses it)."""
+    for name in spec.effects:
+        get_effect(name)
+    if spec.effects:
+        raise InputDataError(
+            f"{spec.path}: {command} identifies the bare coating for an F60 target and "
+            f"cannot use [model] effects = {list(spec.effects)} (their parameters are "
+            "calibrated against measured curves); remove them, or use surrogate calibrate "
+            "/ compare / diagnose"
         )
-        key = input_hash(inputs)
-        if key not in self.records and self.dispatch is not None:
-            self.records.update(self.dispatch(self.study, [params], phase))
-        if key not in self.records:
-            result = self.cache.get(key)
-            if result is None:
-                result = solve_inputs(inputs)
-                self.cache.put(key, inputs, result)
-            self.records[key] = self._tell(params, key, result, phase)
-        return self.records[key]
-
-    def meeting(self) -> list[dict[str, Any]]:
-        tolerance = self.spec.targets.tolerance
-        return [
-            r
-            for r in self.records.values()
-            if r["status"] == "ok" and meets_target(r["misfit"], r["constraints"], tolerance)
-        ]
-
-    def chosen(self) -> dict[str, Any] | None:
-        """The preferred verified point that meets the target, if any."""
-        meeting = self.meeting()
-        if not meeting:
-            return None
-        return min(meeting, key=lambda r: _preference_key(r["params"], self.spec))
-
-    def best(self) -> dict[str, Any] | None:
-        ok = [r for r in self.records.values() if r["status"] == "ok"]
-        if not ok:
-            return None
-        return min(ok, key=lambda r: (not is_feasible(r["constraints"]), r["misfit"]))
-
-    def sample_set(self) -> SampleSet:
-        rows = [r for r in self.records.values() if r["status"] == "ok"]
-        if len(rows) < 3:
-            raise InputDataError(
-                f"only {len(rows)} solver runs succeeded; the surrogate needs "
-                "3 — check the parameter ranges"
-            )
-        runs = pd.DataFrame(
-            {
-                "run_id": np.arange(1, len(rows) + 1),
-                **{n: [r["params"][n] for r in rows] for n in self.names},
-                "f60_n": [r["f60_n"] for r in rows],
-                "theta_sat_deg": [r["theta_sat_deg"] for r in rows],
-                "status": "ok",
-            }
-        )
-        curves = pd.concat(
-            [
-                pd.DataFrame(
-                    {"run_id": i + 1, "angle_deg": r["angle_deg"], "force_n": r["force_n"]}
-                )
-                for i, r in enumerate(rows)
-            ],
-            ignore_index=True,
-        )
-        return SampleSet(runs, curves, self.spec.space, {})
-
-    def _report(self, phase: str) -> None:
-        if not self.progress:
-            return
-        best = self.best()
-        text = (
-            "no successful run yet"
-            if best is None
-            else (
-                f"best verified misfit {100 * best['misfit']:.2f} %"
-                + ("" if is_feasible(best["constraints"]) else " (infeasible)")
-            )
-        )
-        met = " — target met" if self.chosen() is not None else ""
-        print(
-            f"[{self.spec.name}] {phase}: {self.calls}/{self.spec.budget.max_solver_calls} "
-            f"solver calls, {text}{met}",
-            file=sys.stderr,
-            flush=True,
-        )
-
-
-def tell_verification(
-    study: optuna.Study,
-    trial: optuna.Trial,
-    spec: StudySpec,
-    params: dict[str, float],
-    result: dict[str, Any],
-) -> dict[str, Any]:
-    """Finish ``trial`` with one full-solver ``result``; return the verifier's record.
-
-    A failed run is a FAIL trial with its ``reason``; a successful one carries
-    the misfit as value, the constraints (Optuna 5 and the list that
-    optuna-dashboard 0.21 reads), F60, θsat and the curve.
-    """
-    if result["status"] != "ok":
-        trial.set_user_attr("reason", result["reason"])
-        study.tell(trial, state=optuna.trial.TrialState.FAIL)
-        return {"params": params, "status": "failed", "reason": result["reason"]}
-    misfit = relative_misfit(result["f60_n"], _target_of(spec))
-    constraints = constraint_values(params, result["theta_sat_deg"], spec)
-    for name, value in constraints.items():
-        trial.set_constraint(name, value)
-    # optuna-dashboard 0.21 reads only the older list format.
-    trial.storage.set_trial_system_attr(trial._trial_id, "constraints", list(constraints.values()))
-    for name, value in {
-        "f60_n": result["f60_n"],
-        "theta_sat_deg": result["theta_sat_deg"],
-        "saturated": result["saturated"],
-        "constraints": constraints,
-        "feasible": is_feasible(constraints),
-        "curve_angle_deg": result["angle_deg"],
-        "curve_force_n": [round(f, 6) for f in result["force_n"]],
-    }.items():
-        trial.set_user_attr(name, value)
-    study.tell(trial, misfit)
-    return {
-        "params": params,
-        "status": "ok",
-        "f60_n": result["f60_n"],
-        "theta_sat_deg": result["theta_sat_deg"],
-        "saturated": result["saturated"],
-        "misfit": misfit,
-        "constraints": constraints,
-        "number": trial.number,
-        "angle_deg": result["angle_deg"],
-        "force_n": result["force_n"],
-    }
-
-
-def _record_of(trial: optuna.trial.FrozenTrial) -> dict[str, Any]:
-    if trial.state != optuna.trial.TrialState.COMPLETE:
-        return {
-            "params": dict(trial.params),
-            "status": "failed",
-            "reason": trial.user_attrs.get("reason", ""),
-        }
-    attrs = trial.user_attrs
-    return {
-        "params": dict(trial.params),
-        "status": "ok",
-        "f60_n": attrs["f60_n"],
-        "theta_sat_deg": attrs["theta_sat_deg"],
-        "saturated": attrs["saturated"],
-        "misfit": float(trial.value if trial.value is not None else np.inf),
-        "constraints": dict(attrs["constraints"]),
-        "number": trial.number,
-        "angle_deg": attrs["curve_angle_deg"],
-        "force_n": attrs["curve_force_n"],
-    }
-
-
-def _preference_key(params: dict[str, float], spec: StudySpec) -> tuple[float, ...]:
-    return tuple(params[name] for name in spec.preference_order)
 
 
 # -- the search on the surrogate -------------------------------------------------------------
 def _search(model: Any, spec: StudySpec, iteration: int) -> pd.DataFrame:
     """An in-memory Optuna study on the surrogate: constrained, cheap trials."""
-    target, tolerance = _target_of(spec), spec.targets.tolerance
+    target, tolerance = target_of(spec), spec.targets.tolerance
     space = spec.space
 
     sampler = optuna.samplers.TPESampler(
@@ -453,10 +192,10 @@ def _search(model: Any, spec: StudySpec, iteration: int) -> pd.DataFrame:
         n_startup_trials=min(40, spec.budget.surrogate_trials // 4),
     )
     search = optuna.create_study(direction="minimize", sampler=sampler)
-    distributions = _distributions(spec)
+    space_distributions = distributions(spec.space)
     rows: list[dict[str, Any]] = []
     while len(rows) < spec.budget.surrogate_trials:
-        trials = [search.ask(distributions) for _ in range(_SEARCH_BATCH)]
+        trials = [search.ask(space_distributions) for _ in range(_SEARCH_BATCH)]
         X = np.array([[t.params[n] for n in space.names] for t in trials])
         pred = model.predict(X, return_std=True)
         for i, trial in enumerate(trials):
@@ -487,7 +226,7 @@ def _search(model: Any, spec: StudySpec, iteration: int) -> pd.DataFrame:
 def _probability_of_meeting(pred: dict[str, np.ndarray], i: int, spec: StudySpec) -> float:
     """P(F60 within tolerance and θsat ≥ θmin) under the surrogate's predictive law."""
     half_width = np.log1p(spec.targets.tolerance)
-    offset = np.log(pred["f60_n"][i] / _target_of(spec))
+    offset = np.log(pred["f60_n"][i] / target_of(spec))
     sd = max(float(pred["log_f60_std"][i]), 1e-12)
     p_f60 = norm.cdf((half_width - offset) / sd) - norm.cdf((-half_width - offset) / sd)
     theta_min = spec.constraints.theta_sat_deg_min
@@ -547,7 +286,7 @@ def _min_distance(point: np.ndarray, others: np.ndarray) -> float:
 # -- the result ------------------------------------------------------------------------------
 def _result(
     spec: StudySpec,
-    verifier: _Verifier,
+    verifier: Verifier,
     storage_url: str,
     iterations: int,
     calls_to_verify: int | None,
@@ -591,7 +330,7 @@ def _result(
     )
     attach_run_report(
         verifier.study,
-        target_n=_target_of(spec),
+        target_n=target_of(spec),
         tolerance=spec.targets.tolerance,
         records=list(verifier.records.values()),
         chosen_number=None if chosen is None else chosen["number"],
@@ -615,7 +354,7 @@ def _assess(
         good,
         tolerance=spec.targets.tolerance,
         preference_order=spec.preference_order,
-        target_n=_target_of(spec),
+        target_n=target_of(spec),
         solver_gradient=gradient,
     )
     return assessment.to_json()
@@ -637,7 +376,7 @@ def _note(spec: StudySpec, result: RunResult) -> str:
     return "\n".join(lines)
 
 
-def _equally_good(model: Any, spec: StudySpec, verifier: _Verifier, iterations: int) -> np.ndarray:
+def _equally_good(model: Any, spec: StudySpec, verifier: Verifier, iterations: int) -> np.ndarray:
     names = verifier.names
     trials = _search(model, spec, iterations + 1)
     predicted = trials[trials.feasible & (trials.misfit <= spec.targets.tolerance)]
@@ -651,11 +390,11 @@ def _equally_good(model: Any, spec: StudySpec, verifier: _Verifier, iterations: 
 def _message(
     spec: StudySpec,
     status: str,
-    verifier: _Verifier,
+    verifier: Verifier,
     point: dict[str, Any] | None,
     calls_to_verify: int | None,
 ) -> str:
-    target, tolerance = _target_of(spec), spec.targets.tolerance
+    target, tolerance = target_of(spec), spec.targets.tolerance
     if status == "verified" and point is not None:
         return (
             f"verified: F60 = {point['f60_n']:.4g} N is within {100 * tolerance:g} % of "
@@ -683,6 +422,6 @@ def _message(
     )
 
 
-def _reach(verifier: _Verifier) -> tuple[float, float] | None:
+def _reach(verifier: Verifier) -> tuple[float, float] | None:
     values = [r["f60_n"] for r in verifier.records.values() if r["status"] == "ok"]
     return (min(values), max(values)) if values else None

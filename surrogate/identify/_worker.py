@@ -17,23 +17,25 @@ during a solve fails the trial, queues its copy and exits. A solver failure is a
 
 from __future__ import annotations
 
-import multiprocessing
+import logging
 import signal
-import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import asdict, dataclass, replace
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import optuna
 from optuna.storages import RetryHeartbeatStaleTrialCallback
-from optuna.trial import FrozenTrial, TrialState
+from optuna.trial import TrialState
 
 from .._errors import InputDataError
-from ..solvers._batch import solve_inputs, solver_inputs
+from .._log import show_progress
+from .._pool import process_context
+from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
+from ..storage._optuna import distributions, quiet_optuna
 from ..storage._storage import (
     MAX_RETRY,
     check_workers,
@@ -41,10 +43,19 @@ from ..storage._storage import (
     stale_trial_check,
     storage_errors,
 )
-from ..study._spec import StudySpec, Targets, load_study
-from ._loop import _open_study, _quiet_optuna, _record_of, tell_verification, verify_study_name
+from ..study._spec import StudySpec, load_study
+from ._verify import (
+    as_planned,
+    enqueue,
+    finished_records,
+    tell_verification,
+    verification_inputs,
+    verify_study_name,
+)
 
-__all__ = ["WorkerResult", "enqueue_points", "finished_records", "work"]
+__all__ = ["HEARTBEAT_S", "WorkerDispatcher", "WorkerResult", "work"]
+
+logger = logging.getLogger(__name__)
 
 Solve = Callable[[dict[str, Any]], dict[str, Any]]
 POLL_S = 0.5
@@ -73,58 +84,7 @@ class WorkerResult:
         return asdict(self)
 
 
-# -- planning --------------------------------------------------------------------------------
-def enqueue_points(
-    study: optuna.Study, spec: StudySpec, points: Iterable[Mapping[str, float]], *, phase: str
-) -> list[str]:
-    """Queue each point as a WAITING trial unless it is already queued, running or done.
-
-    Returns the input hashes of ``points`` in order (one per point).
-    """
-    known = {
-        t.user_attrs.get("input_hash")
-        for t in study.get_trials(deepcopy=False)
-        if t.state != TrialState.FAIL or "reason" in t.user_attrs or _retry_pending(t)
-    }
-    keys = []
-    for point in points:
-        params = {name: float(point[name]) for name in spec.space.names}
-        key = input_hash(solver_inputs(params, spec.rig, solver=spec.solver))
-        if key not in known:
-            study.enqueue_trial(params, user_attrs={"input_hash": key, "phase": phase})
-            known.add(key)
-        keys.append(key)
-    return keys
-
-
-def _retry_pending(trial: FrozenTrial) -> bool:
-    """An interrupted trial whose copy was queued again (see RetryHeartbeatStaleTrialCallback)."""
-    return len(trial.system_attrs.get("retry_history", [])) + 1 <= MAX_RETRY
-
-
-def finished_records(study: optuna.Study, keys: Iterable[str]) -> dict[str, dict[str, Any]]:
-    """The verifier's record of every key whose run is over (done, failed or abandoned)."""
-    wanted = set(keys)
-    by_key: dict[str, list[FrozenTrial]] = {}
-    for trial in study.get_trials(deepcopy=False):
-        key = trial.user_attrs.get("input_hash")
-        if key in wanted:
-            by_key.setdefault(key, []).append(trial)
-    records = {}
-    for key, trials in by_key.items():
-        done = [t for t in trials if t.state == TrialState.COMPLETE or "reason" in t.user_attrs]
-        if done:
-            records[key] = _record_of(done[-1])
-        elif all(t.state == TrialState.FAIL and not _retry_pending(t) for t in trials):
-            trial = trials[-1]
-            records[key] = {
-                "params": dict(trial.params),
-                "status": "failed",
-                "reason": f"its worker died {MAX_RETRY + 1} times",
-            }
-    return records
-
-
+# -- planning ---------------------------------------------------------------------------------
 class WorkerDispatcher:
     """Verify a batch of points through the storage: queue, work or wait, collect.
 
@@ -152,7 +112,7 @@ class WorkerDispatcher:
     def __call__(
         self, study: optuna.Study, points: list[dict[str, float]], phase: str
     ) -> dict[str, dict[str, Any]]:
-        keys = enqueue_points(study, self.spec, points, phase=phase)
+        keys = enqueue(study, self.spec, points, phase=phase)
         if self.jobs > 0:
             todo = len(set(keys) - set(finished_records(study, keys)))
             work(  # one point: this process, no start-up cost
@@ -165,11 +125,12 @@ class WorkerDispatcher:
                 progress=False,
             )
         elif self.progress:
-            print(
-                f"[{self.spec.name}] {phase}: {len(keys)} runs queued in {self.storage}; "
-                "waiting for `surrogate worker` processes",
-                file=sys.stderr,
-                flush=True,
+            logger.info(
+                "[%s] %s: %d runs queued in %s; waiting for `surrogate worker` processes",
+                self.spec.name,
+                phase,
+                len(keys),
+                self.storage,
             )
         while True:
             records = finished_records(study, keys)
@@ -221,7 +182,9 @@ def work(
         raise InputDataError(f"--jobs must be ≥ 1 for a worker, got {jobs}")
     if not isinstance(idle_timeout_s, int | float) or not idle_timeout_s >= 0:
         raise InputDataError(f"--idle-timeout must be ≥ 0 s, got {idle_timeout_s!r}")
-    _quiet_optuna()
+    quiet_optuna()
+    if progress:
+        show_progress()
     worker = _Worker(spec, storage, heartbeat_s=heartbeat_s, solve=solve, progress=progress)
     if jobs == 1:
         counts = worker.loop(idle_timeout_s)
@@ -243,10 +206,9 @@ def _work_in_processes(
     progress: bool,
 ) -> dict[str, Any]:
     """``jobs`` worker processes; SIGTERM to this one is passed on to them."""
-    # forkserver: a clean process (no inherited database connections) that has
-    # imported the package once; each worker forks from it in milliseconds
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(["surrogate.identify._worker"])
+    # the package's one start method (surrogate._pool); this process closed its
+    # storage before, so no child inherits a database connection in use
+    context = process_context()
     results = context.SimpleQueue()
     processes = [
         context.Process(
@@ -293,7 +255,7 @@ def _process_main(
     solve: Solve,
     progress: bool,
 ) -> None:
-    _quiet_optuna()
+    quiet_optuna()
     worker = _Worker(spec, storage, heartbeat_s=heartbeat_s, solve=solve, progress=progress)
     results.put(worker.loop(idle_timeout_s))
 
@@ -321,7 +283,7 @@ class _Worker:
                     f"no study {verify_study_name(spec)!r} in {storage}; plan it first: "
                     f"surrogate run {spec.path} --storage {storage} --jobs 0"
                 ) from None
-        self.spec = _as_planned(spec, self.study.user_attrs)
+        self.spec = as_planned(spec, self.study.user_attrs)
         self.study_id = self.storage.get_study_id_from_name(verify_study_name(spec))
         self.heartbeat_s = heartbeat_s
         self.solve = solve
@@ -396,9 +358,9 @@ class _Worker:
         try:
             params = {
                 name: trial.suggest_float(name, d.low, d.high, log=d.log)
-                for name, d in _distributions(self.spec).items()
+                for name, d in distributions(self.spec.space).items()
             }
-            inputs = solver_inputs(params, self.spec.rig, solver=self.spec.solver)
+            inputs = verification_inputs(self.spec, params)
             key = input_hash(inputs)
             result = self._result(key, inputs)
         except _Interrupted:
@@ -448,11 +410,11 @@ class _Worker:
         except optuna.exceptions.UpdateFinishedTrialError:
             pass  # judged stale meanwhile: failed and queued again already
         if self.progress:
-            print(
-                f"[{self.spec.name}] trial {trial.number}: stopped by {self._stop}; "
-                "queued again for another worker",
-                file=sys.stderr,
-                flush=True,
+            logger.info(
+                "[%s] trial %d: stopped by %s; queued again for another worker",
+                self.spec.name,
+                trial.number,
+                self._stop,
             )
 
     def _count(self, number: int, record: dict[str, Any]) -> None:
@@ -464,7 +426,7 @@ class _Worker:
                 if record["status"] == "ok"
                 else f"failed: {record['reason']}"
             )
-            print(f"[{self.spec.name}] trial {number}: {text}", file=sys.stderr, flush=True)
+            logger.info("[%s] trial %d: %s", self.spec.name, number, text)
 
 
 _SIGNALS = (signal.SIGTERM, signal.SIGINT)
@@ -495,33 +457,3 @@ class _HeartbeatThread:
                 return  # failed as stale by another worker: nothing to keep alive
             except Exception:  # a storage hiccup: the next beat retries
                 continue
-
-
-def _distributions(spec: StudySpec) -> dict[str, optuna.distributions.FloatDistribution]:
-    return {
-        p.name: optuna.distributions.FloatDistribution(p.low, p.high, log=p.log) for p in spec.space
-    }
-
-
-def _as_planned(spec: StudySpec, attrs: Mapping[str, Any]) -> StudySpec:
-    """The study file with the plan's target; refuse a file that differs from the plan."""
-    for key, mine in (
-        ("solver", spec.solver),
-        ("rig", spec.rig.to_dict()),
-        ("parameters", spec.space.to_dict()),
-    ):
-        if key in attrs and attrs[key] != mine:
-            raise InputDataError(
-                f"{spec.path}: its [{'parameters' if key == 'parameters' else key}] differs from "
-                f"the plan in the storage; start the worker with the planner's study file"
-            )
-    target = attrs.get("target_f60_n", spec.targets.f60_n)
-    tolerance = attrs.get("tolerance", spec.targets.tolerance)
-    return replace(spec, targets=Targets(target, tolerance))
-
-
-def open_planner_study(spec: StudySpec, storage: str, *, heartbeat_s: int | None) -> optuna.Study:
-    """The verify study for a planner (created if new), on a heartbeat-aware storage."""
-    _quiet_optuna()
-    with storage_errors(storage):
-        return _open_study(spec, open_storage(storage, heartbeat_s=heartbeat_s))

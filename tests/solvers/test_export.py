@@ -6,7 +6,7 @@ import pytest
 
 import surrogate
 from surrogate._cli import main
-from surrogate.identify._loop import _open_study, _quiet_optuna, _Verifier
+from surrogate.identify._verify import Verifier, open_verify_study
 from surrogate.solvers._lsdyna import FIELD
 from surrogate.study._spec import load_study
 
@@ -19,8 +19,9 @@ def _verified_study(tmp_path, target):
     path = tmp_path / "coat.toml"
     path.write_text(f'[study]\nname = "coat"\n[targets]\nf60_n = {target!r}\n')
     spec = load_study(path)
-    _quiet_optuna()
-    verifier = _Verifier(spec, _open_study(spec, spec.default_storage()), progress=False)
+    verifier = Verifier(
+        spec, open_verify_study(spec, spec.default_storage(), heartbeat_s=None), progress=False
+    )
     for point in (OTHER, OPTIMUM):
         verifier.verify([[point[n] for n in spec.space.names]], phase="test")
     return path

@@ -17,7 +17,8 @@ import pytest
 
 from surrogate._cli import main
 from surrogate.identify._doe import make_design
-from surrogate.identify._worker import enqueue_points, open_planner_study, work
+from surrogate.identify._verify import enqueue, open_verify_study
+from surrogate.identify._worker import work
 from surrogate.study._spec import load_study
 from tests.workers.fixed_cost import FixedCostSolve
 
@@ -170,7 +171,7 @@ def project(tmp_path_factory):
     spec = load_study(folder / "paper_coating.toml")
     points = make_design("lhs", spec.space, n=4, seed=0).to_dict("records")
     for storage, finished in ((spec.default_storage(), True), (f"{folder}/study.log", False)):
-        enqueue_points(open_planner_study(spec, storage, heartbeat_s=None), spec, points, phase="p")
+        enqueue(open_verify_study(spec, storage, heartbeat_s=None), spec, points, phase="p")
         if finished:
             solve = FixedCostSolve(folder / "solver.log", 0.0)
             work(spec, storage=storage, idle_timeout_s=0.0, solve=solve, progress=False)

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from surrogate.identify._doe import make_design
-from surrogate.identify._worker import enqueue_points, open_planner_study
+from surrogate.identify._verify import enqueue, open_verify_study
 from surrogate.study._spec import load_study
 
 REPO = Path(__file__).resolve().parents[2]
@@ -30,9 +30,9 @@ def study_file(tmp_path):
 
 def _plan(study_file, storage_url):
     spec = load_study(study_file)
-    study = open_planner_study(spec, storage_url, heartbeat_s=None)
+    study = open_verify_study(spec, storage_url, heartbeat_s=None)
     points = make_design("lhs", spec.space, n=3, seed=0).to_dict("records")
-    enqueue_points(study, spec, points, phase="plan")
+    enqueue(study, spec, points, phase="plan")
 
 
 def _worker(study_file, storage_url, preexec_fn=None):

@@ -20,7 +20,8 @@ import optuna
 import pytest
 
 from surrogate.identify._doe import make_design
-from surrogate.identify._worker import enqueue_points, open_planner_study, work
+from surrogate.identify._verify import enqueue, open_verify_study
+from surrogate.identify._worker import work
 from surrogate.storage._storage import open_storage
 from surrogate.study._spec import load_study
 from tests.workers.fixed_cost import FixedCostSolve, events
@@ -40,9 +41,9 @@ def study_file(tmp_path):
 
 def _plan(study_file, storage_url, n):
     spec = load_study(study_file)
-    study = open_planner_study(spec, storage_url, heartbeat_s=None)
+    study = open_verify_study(spec, storage_url, heartbeat_s=None)
     points = make_design("lhs", spec.space, n=n, seed=3).to_dict("records")
-    return enqueue_points(study, spec, points, phase="plan")
+    return enqueue(study, spec, points, phase="plan")
 
 
 def _worker(study_file, storage_url, log, cost_s, *, jobs=1):

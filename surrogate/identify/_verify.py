@@ -1,0 +1,424 @@
+"""The verify study: full-solver runs of the main job as trials of ``<name>/verify``.
+
+One module for every rule of that study, used alike by the in-process verifier
+(:class:`Verifier`, ``surrogate run --jobs 1``) and by the workers
+(:mod:`surrogate.identify._worker`, ``--jobs N`` and ``surrogate worker``):
+
+- :func:`verification_inputs`: what a verification solves and hashes — the
+  point, the rig, the solver *and its settings* (mesh, command, timeout,
+  template …), so a worker and the planner agree on every run's identity;
+- :func:`open_verify_study` (created with its attributes when new) and
+  :func:`as_planned` (a worker's study file must match the plan);
+- :func:`enqueue` (a point becomes a ``WAITING`` trial carrying its input hash
+  and phase), :func:`tell_verification` (a result finishes its trial),
+  :func:`record_of` (a finished trial read back) and :func:`finished_records`.
+
+A trial holds the params, the relative F60 misfit as value, the constraint
+values (``≤ 0`` feasible), F60, θsat and the curve.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import optuna
+import pandas as pd
+from optuna.trial import FrozenTrial, TrialState
+
+from .._errors import InputDataError
+from ..solvers._batch import solve_inputs, solver_inputs
+from ..solvers._cache import ResultCache, input_hash
+from ..storage._optuna import distributions, quiet_optuna
+from ..storage._storage import MAX_RETRY, open_storage, storage_errors
+from ..study._samples import SampleSet
+from ..study._spec import StudySpec, Targets
+from ._objective import constraint_values, is_feasible, meets_target, relative_misfit
+
+__all__ = [
+    "METRIC",
+    "Verifier",
+    "as_planned",
+    "enqueue",
+    "finished_records",
+    "open_verify_study",
+    "record_of",
+    "target_of",
+    "tell_verification",
+    "verification_inputs",
+    "verify_study_name",
+]
+
+logger = logging.getLogger(__name__)
+
+METRIC = "f60_relative_misfit"
+Record = dict[str, Any]
+Dispatch = Callable[[optuna.Study, list[dict[str, float]], str], dict[str, Record]]
+
+
+def verify_study_name(spec: StudySpec) -> str:
+    return f"{spec.name}/verify"
+
+
+def target_of(spec: StudySpec) -> float:
+    target = spec.targets.f60_n
+    assert target is not None  # checked when the run starts
+    return target
+
+
+def verification_inputs(spec: StudySpec, params: Mapping[str, float]) -> dict[str, Any]:
+    """The solver inputs of one verification: point, rig, solver and its settings."""
+    return solver_inputs(
+        dict(params), spec.rig, solver=spec.solver, solver_settings=spec.solver_settings
+    )
+
+
+# -- the study --------------------------------------------------------------------------------
+def plan_attributes(spec: StudySpec) -> dict[str, Any]:
+    """The study attributes a planner writes and a worker checks its study file against."""
+    return {
+        "description": "full-solver verification runs of a coating identification "
+        "(surrogate run); value = |F60/target - 1|, constraints <= 0 feasible",
+        "objective": f"{METRIC} = |F60 / target - 1|",
+        "target_f60_n": target_of(spec),
+        "tolerance": spec.targets.tolerance,
+        "constraints": [
+            "theta_sat_min: theta_min - theta_sat [deg]",
+            "tcoat_max: Tcoat - fraction*t [mm]",
+        ],
+        "parameters": spec.space.to_dict(),
+        "solver": spec.solver,
+        "solver_settings": dict(sorted(spec.solver_settings.items())),
+        "rig": spec.rig.to_dict(),
+    }
+
+
+def open_verify_study(spec: StudySpec, storage: str, *, heartbeat_s: int | None) -> optuna.Study:
+    """The verify study for a planner (created if new), on a heartbeat-aware storage."""
+    quiet_optuna()
+    with storage_errors(storage):
+        study = optuna.create_study(
+            storage=open_storage(storage, heartbeat_s=heartbeat_s),
+            study_name=verify_study_name(spec),
+            direction="minimize",
+            load_if_exists=True,
+        )
+        study.set_metric_names([METRIC])
+        for key, value in plan_attributes(spec).items():
+            if study.user_attrs.get(key) != value:
+                study.set_user_attr(key, value)
+    return study
+
+
+def as_planned(spec: StudySpec, attrs: Mapping[str, Any]) -> StudySpec:
+    """The study file with the plan's target; refuse a file that differs from the plan.
+
+    The solver settings are part of every run's identity (:func:`verification_inputs`),
+    so a worker with other settings would solve other runs than the ones queued.
+    """
+    for key, section, mine in (
+        ("solver", "solver", spec.solver),
+        ("solver_settings", "solver", dict(sorted(spec.solver_settings.items()))),
+        ("rig", "rig", spec.rig.to_dict()),
+        ("parameters", "parameters", spec.space.to_dict()),
+    ):
+        if key in attrs and attrs[key] != mine:
+            raise InputDataError(
+                f"{spec.path}: its [{section}] differs from the plan in the storage; "
+                "start the worker with the planner's study file"
+            )
+    target = attrs.get("target_f60_n", spec.targets.f60_n)
+    tolerance = attrs.get("tolerance", spec.targets.tolerance)
+    return replace(spec, targets=Targets(target, tolerance))
+
+
+# -- trials -----------------------------------------------------------------------------------
+def enqueue(
+    study: optuna.Study, spec: StudySpec, points: Iterable[Mapping[str, float]], *, phase: str
+) -> list[str]:
+    """Queue each point as a WAITING trial unless it is already queued, running or done.
+
+    Returns the input hashes of ``points`` in order (one per point).
+    """
+    known = {
+        t.user_attrs.get("input_hash")
+        for t in study.get_trials(deepcopy=False)
+        if t.state != TrialState.FAIL or "reason" in t.user_attrs or retry_pending(t)
+    }
+    keys = []
+    for point in points:
+        params = {name: float(point[name]) for name in spec.space.names}
+        key = input_hash(verification_inputs(spec, params))
+        if key not in known:
+            study.enqueue_trial(params, user_attrs={"input_hash": key, "phase": phase})
+            known.add(key)
+        keys.append(key)
+    return keys
+
+
+def retry_pending(trial: FrozenTrial) -> bool:
+    """An interrupted trial whose copy was queued again (see RetryHeartbeatStaleTrialCallback)."""
+    return len(trial.system_attrs.get("retry_history", [])) + 1 <= MAX_RETRY
+
+
+def tell_verification(
+    study: optuna.Study,
+    trial: optuna.Trial,
+    spec: StudySpec,
+    params: dict[str, float],
+    result: dict[str, Any],
+) -> Record:
+    """Finish ``trial`` with one full-solver ``result``; return the verifier's record.
+
+    A failed run is a FAIL trial with its ``reason``; a successful one carries
+    the misfit as value, the constraints (Optuna 5 and the list that
+    optuna-dashboard 0.21 reads), F60, θsat and the curve.
+    """
+    if result["status"] != "ok":
+        trial.set_user_attr("reason", result["reason"])
+        study.tell(trial, state=TrialState.FAIL)
+        return {"params": params, "status": "failed", "reason": result["reason"]}
+    misfit = relative_misfit(result["f60_n"], target_of(spec))
+    constraints = constraint_values(params, result["theta_sat_deg"], spec)
+    for name, value in constraints.items():
+        trial.set_constraint(name, value)
+    # optuna-dashboard 0.21 reads only the older list format.
+    trial.storage.set_trial_system_attr(trial._trial_id, "constraints", list(constraints.values()))
+    for name, value in {
+        "f60_n": result["f60_n"],
+        "theta_sat_deg": result["theta_sat_deg"],
+        "saturated": result["saturated"],
+        "constraints": constraints,
+        "feasible": is_feasible(constraints),
+        "curve_angle_deg": result["angle_deg"],
+        "curve_force_n": [round(f, 6) for f in result["force_n"]],
+    }.items():
+        trial.set_user_attr(name, value)
+    study.tell(trial, misfit)
+    return {
+        "params": params,
+        "status": "ok",
+        "f60_n": result["f60_n"],
+        "theta_sat_deg": result["theta_sat_deg"],
+        "saturated": result["saturated"],
+        "misfit": misfit,
+        "constraints": constraints,
+        "number": trial.number,
+        "angle_deg": result["angle_deg"],
+        "force_n": result["force_n"],
+    }
+
+
+def record_of(trial: FrozenTrial) -> Record:
+    """The record :func:`tell_verification` returned, read back from a finished trial."""
+    if trial.state != TrialState.COMPLETE:
+        return {
+            "params": dict(trial.params),
+            "status": "failed",
+            "reason": trial.user_attrs.get("reason", ""),
+        }
+    attrs = trial.user_attrs
+    return {
+        "params": dict(trial.params),
+        "status": "ok",
+        "f60_n": attrs["f60_n"],
+        "theta_sat_deg": attrs["theta_sat_deg"],
+        "saturated": attrs["saturated"],
+        "misfit": float(trial.value if trial.value is not None else np.inf),
+        "constraints": dict(attrs["constraints"]),
+        "number": trial.number,
+        "angle_deg": attrs["curve_angle_deg"],
+        "force_n": attrs["curve_force_n"],
+    }
+
+
+def finished_records(study: optuna.Study, keys: Iterable[str]) -> dict[str, Record]:
+    """The record of every key whose run is over (done, failed or abandoned)."""
+    wanted = set(keys)
+    by_key: dict[str, list[FrozenTrial]] = {}
+    for trial in study.get_trials(deepcopy=False):
+        key = trial.user_attrs.get("input_hash")
+        if key in wanted:
+            by_key.setdefault(key, []).append(trial)
+    records = {}
+    for key, trials in by_key.items():
+        done = [t for t in trials if t.state == TrialState.COMPLETE or "reason" in t.user_attrs]
+        if done:
+            records[key] = record_of(done[-1])
+        elif all(t.state == TrialState.FAIL and not retry_pending(t) for t in trials):
+            trial = trials[-1]
+            records[key] = {
+                "params": dict(trial.params),
+                "status": "failed",
+                "reason": f"its worker died {MAX_RETRY + 1} times",
+            }
+    return records
+
+
+# -- the in-process verifier ------------------------------------------------------------------
+class Verifier:
+    """Runs points with the full solver as trials of the verify study; resumes.
+
+    ``dispatch`` (set by ``run --jobs N≠1``) verifies batches through the
+    storage's workers instead of this process; both paths name a run by the
+    hash of :func:`verification_inputs`, so no run is solved twice.
+    """
+
+    def __init__(
+        self,
+        spec: StudySpec,
+        study: optuna.Study,
+        *,
+        progress: bool,
+        dispatch: Dispatch | None = None,
+    ) -> None:
+        self.spec = spec
+        self.study = study
+        self.progress = progress
+        self.dispatch = dispatch
+        self.cache = ResultCache(spec.directory / ".solver-cache")
+        self.names = list(spec.space.names)
+        self.records: dict[str, Record] = {}
+        for trial in study.get_trials(
+            deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL)
+        ):
+            key = trial.user_attrs.get("input_hash")
+            # a FAIL without a reason is an interrupted worker's run; its retry counts
+            if key is not None and (trial.values or "reason" in trial.user_attrs):
+                self.records[key] = record_of(trial)
+
+    @property
+    def calls(self) -> int:
+        return len(self.records)
+
+    def points(self) -> np.ndarray:
+        return np.array([[r["params"][n] for n in self.names] for r in self.records.values()])
+
+    def verify(self, points: np.ndarray, *, phase: str) -> None:
+        """Verify ``points`` in order while the budget lasts."""
+        batch = [dict(zip(self.names, map(float, p), strict=True)) for p in np.atleast_2d(points)]
+        if self.dispatch is not None:
+            room = self.spec.budget.max_solver_calls - self.calls
+            self.records.update(self.dispatch(self.study, batch[: max(room, 0)], phase))
+        for params in batch:
+            if self.calls >= self.spec.budget.max_solver_calls:
+                return
+            self.solve(params, phase=phase)
+        self._report(phase)
+
+    def solve(self, params: dict[str, float], *, phase: str) -> Record:
+        """One full-solver run as a trial; a finished run is never repeated."""
+        inputs = verification_inputs(self.spec, params)
+        key = input_hash(inputs)
+        if key not in self.records and self.dispatch is not None:
+            self.records.update(self.dispatch(self.study, [params], phase))
+        if key not in self.records:
+            result = self.cache.get(key)
+            if result is None:
+                result = solve_inputs(inputs)
+                self.cache.put(key, inputs, result)
+            self.records[key] = self._tell(params, key, result, phase)
+        return self.records[key]
+
+    def sensitivities(self, point: dict[str, Any]) -> np.ndarray | None:
+        """``∂ log F60 / ∂ log p`` at a verified point, by forward differences of
+        the full solver (one run per parameter, +5 % each); None if the budget
+        allows none (``[budget] identifiability_runs``)."""
+        if self.spec.budget.identifiability_runs < len(self.names):
+            return None
+        step = np.log(1.05)
+        gradient = np.empty(len(self.names))
+        for k, name in enumerate(self.names):
+            spec = self.spec.space[name]
+            direction = 1.0 if point["params"][name] * 1.05 <= spec.high else -1.0
+            shifted = {**point["params"], name: point["params"][name] * np.exp(direction * step)}
+            record = self.solve(shifted, phase="identifiability")
+            if record["status"] != "ok":
+                return None
+            gradient[k] = direction * np.log(record["f60_n"] / point["f60_n"]) / step
+        return gradient
+
+    def _tell(
+        self, params: dict[str, float], key: str, result: dict[str, Any], phase: str
+    ) -> Record:
+        self.study.enqueue_trial(params, skip_if_exists=False)
+        trial = self.study.ask(distributions(self.spec.space))
+        trial.set_user_attr("input_hash", key)
+        trial.set_user_attr("phase", phase)
+        return tell_verification(self.study, trial, self.spec, params, result)
+
+    def meeting(self) -> list[Record]:
+        tolerance = self.spec.targets.tolerance
+        return [
+            r
+            for r in self.records.values()
+            if r["status"] == "ok" and meets_target(r["misfit"], r["constraints"], tolerance)
+        ]
+
+    def chosen(self) -> Record | None:
+        """The preferred verified point that meets the target, if any."""
+        meeting = self.meeting()
+        if not meeting:
+            return None
+        order = self.spec.preference_order
+        return min(meeting, key=lambda r: tuple(r["params"][name] for name in order))
+
+    def best(self) -> Record | None:
+        ok = [r for r in self.records.values() if r["status"] == "ok"]
+        if not ok:
+            return None
+        return min(ok, key=lambda r: (not is_feasible(r["constraints"]), r["misfit"]))
+
+    def sample_set(self) -> SampleSet:
+        """The verified runs as the surrogate's training set."""
+        rows = [r for r in self.records.values() if r["status"] == "ok"]
+        if len(rows) < 3:
+            raise InputDataError(
+                f"only {len(rows)} solver runs succeeded; the surrogate needs "
+                "3 — check the parameter ranges"
+            )
+        runs = pd.DataFrame(
+            {
+                "run_id": np.arange(1, len(rows) + 1),
+                **{n: [r["params"][n] for r in rows] for n in self.names},
+                "f60_n": [r["f60_n"] for r in rows],
+                "theta_sat_deg": [r["theta_sat_deg"] for r in rows],
+                "status": "ok",
+            }
+        )
+        curves = pd.concat(
+            [
+                pd.DataFrame(
+                    {"run_id": i + 1, "angle_deg": r["angle_deg"], "force_n": r["force_n"]}
+                )
+                for i, r in enumerate(rows)
+            ],
+            ignore_index=True,
+        )
+        return SampleSet(runs, curves, self.spec.space, {})
+
+    def _report(self, phase: str) -> None:
+        if not self.progress:
+            return
+        best = self.best()
+        text = (
+            "no successful run yet"
+            if best is None
+            else (
+                f"best verified misfit {100 * best['misfit']:.2f} %"
+                + ("" if is_feasible(best["constraints"]) else " (infeasible)")
+            )
+        )
+        met = " — target met" if self.chosen() is not None else ""
+        logger.info(
+            "[%s] %s: %d/%d solver calls, %s%s",
+            self.spec.name,
+            phase,
+            self.calls,
+            self.spec.budget.max_solver_calls,
+            text,
+            met,
+        )

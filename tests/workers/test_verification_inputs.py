@@ -1,0 +1,113 @@
+"""A multi-worker run and an in-process run of a study with solver settings make the
+same trials: the workers solve with the study's ``[solver]`` settings and name each
+run by the same hash as the planner, so no run is solved twice or with other settings."""
+
+from __future__ import annotations
+
+import collections
+import os
+from typing import Any, ClassVar
+
+import optuna
+import pytest
+from optuna.trial import TrialState
+
+import surrogate
+from surrogate.solvers import get_solver
+from surrogate.solvers._base import _REGISTRY, Solver
+from surrogate.solvers._cache import input_hash
+
+LOG_VARIABLE = "SURROGATE_TEST_SOLVER_LOG"
+
+
+class ScaledSolver(Solver):
+    """Test only: the built-in solver's curve times the setting ``scale`` (default 1),
+    logging the hash of every run it solves to the file named by $SURROGATE_TEST_SOLVER_LOG."""
+
+    name: ClassVar[str] = "test-scaled"
+    version: ClassVar[str] = "test-1"
+    settings_keys: ClassVar[tuple[str, ...]] = ("scale",)
+
+    def solve(self, inputs: dict[str, Any]) -> dict[str, Any]:
+        with open(os.environ[LOG_VARIABLE], "a", encoding="utf-8") as log:
+            log.write(f"{input_hash(inputs)}\n")
+        scale = float((inputs.get("solver_settings") or {}).get("scale", 1.0))
+        plain = {k: v for k, v in inputs.items() if k != "solver_settings"}
+        result = get_solver("builtin").solve({**plain, "solver": "builtin"})
+        for key in ("force_n", "force_perp_n"):
+            result[key] = [scale * f for f in result[key]]
+        result["f60_n"] *= scale
+        return result
+
+
+@pytest.fixture
+def scaled_solver(monkeypatch):
+    monkeypatch.setitem(_REGISTRY, ScaledSolver.name, ScaledSolver)
+
+
+STUDY = """
+[study]
+name = "scaled"
+seed = 0
+
+[solver]
+kind = "test-scaled"
+scale = 2.0
+
+[targets]
+f60_n = 19.9
+tolerance = 0.01
+
+[budget]
+initial_samples = 4
+max_solver_calls = 9
+surrogate_trials = 120
+identifiability_runs = 0
+"""
+
+
+def _run(folder, storage: str, jobs: int, monkeypatch) -> tuple[Any, list[Any], list[str]]:
+    folder.mkdir()
+    study = folder / "scaled.toml"
+    study.write_text(STUDY)
+    log = folder / "solver.log"
+    monkeypatch.setenv(LOG_VARIABLE, str(log))
+    result = surrogate.run(study, storage=storage, jobs=jobs, progress=False)
+    trials = optuna.load_study(study_name="scaled/verify", storage=storage).get_trials()
+    return result, trials, log.read_text().split()
+
+
+def _summary(trials) -> list[tuple[Any, ...]]:
+    return [
+        (
+            t.state,
+            tuple(sorted(t.params.items())),
+            t.value,
+            t.user_attrs.get("input_hash"),
+            t.user_attrs.get("phase"),
+            t.user_attrs.get("f60_n"),
+        )
+        for t in sorted(trials, key=lambda t: t.user_attrs["input_hash"])
+    ]
+
+
+def test_workers_and_the_planner_solve_the_same_runs_with_the_study_settings(
+    tmp_path, scaled_solver, monkeypatch
+):
+    sqlite = f"sqlite:///{tmp_path / 'alone' / 'scaled.db'}"
+    alone, alone_trials, alone_log = _run(tmp_path / "alone", sqlite, 1, monkeypatch)
+    journal = f"journal://{tmp_path / 'workers' / 'study.log'}"
+    shared, shared_trials, shared_log = _run(tmp_path / "workers", journal, 2, monkeypatch)
+
+    assert alone.solver_calls == shared.solver_calls == len(alone_trials) >= 5
+    assert _summary(shared_trials) == _summary(alone_trials)
+    assert all(t.state == TrialState.COMPLETE for t in shared_trials)
+    # every run solved once, with the settings: the hash the trial carries is the one solved
+    assert collections.Counter(shared_log) == {
+        t.user_attrs["input_hash"]: 1 for t in shared_trials
+    }
+    assert sorted(shared_log) == sorted(alone_log)
+    # and the setting took effect in the workers: F60 is twice the built-in's
+    trial = shared_trials[0]
+    plain = surrogate.simulate(**trial.params)
+    assert trial.user_attrs["f60_n"] == pytest.approx(2.0 * plain.f60_n, rel=1e-12)
