@@ -46,7 +46,7 @@ sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != 
 
 import surrogate  # noqa: E402
 from surrogate import Rig  # noqa: E402
-from surrogate.calibration._loop import coat_section  # noqa: E402
+from surrogate.calibration._problem import coat_section  # noqa: E402
 from surrogate.calibration._synthetic import calibration_sets, write_calibration_study  # noqa: E402
 
 THICKNESS_MM = Rig().thickness_mm  # the studies use the default rig

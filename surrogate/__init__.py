@@ -38,7 +38,7 @@ _LAZY = {
     "CoatingSurrogate": ".gp",
     "CalibrationResult": ".calibration._loop",
     "calibrate": ".calibration._loop",
-    "RunResult": ".identify._loop",
+    "RunResult": ".identify",
     "run": ".identify._loop",
     "CompareResult": ".calibration._compare",
     "DiagnosisResult": ".calibration._diagnose",

@@ -185,6 +185,22 @@ BAD_FILES = {
 }
 
 
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"jobs": 0}, "--jobs must be ≥ 1, got 0"),
+        ({"max_solver_calls": 5}, "--budget must be ≥ 10 solver runs, got 5"),
+    ],
+)
+def test_the_api_refuses_what_the_cli_refuses_before_writing(tmp_path, options, message):
+    path = _study(tmp_path, BASE_TESTS[:2])
+    before = sorted(p.name for p in tmp_path.iterdir())
+    with pytest.raises(surrogate.InputDataError) as error:
+        surrogate.calibrate(path, progress=False, **options)
+    assert str(error.value) == message
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # no storage, no cache
+
+
 @pytest.mark.parametrize("case", sorted(BAD_FILES))
 def test_bad_measurement_files_are_refused_by_calibrate_and_compare(tmp_path, capsys, case):
     path = _study(tmp_path, BASE_TESTS[:2])
@@ -219,7 +235,7 @@ def test_compare_refuses_params_outside_the_ranges_or_incomplete(tmp_path):
 
 def test_model_state_surrogate_inputs_follow_the_effects(tmp_path):
     """The surrogate sees what the solver sees: a tension effect is a stiffer coat."""
-    from surrogate.calibration._loop import CalibrationProblem, state_features
+    from surrogate.calibration._problem import CalibrationProblem, state_features
     from surrogate.study._measurements import load_measurements
     from surrogate.study._spec import load_study
 
@@ -235,16 +251,18 @@ def test_model_state_surrogate_inputs_follow_the_effects(tmp_path):
 
 
 def test_the_fast_mean_of_the_curve_surrogate_is_scikit_learns(tmp_path):
-    from surrogate.calibration._loop import CalibrationProblem, CurveSurrogate, _Runs
+    from surrogate.calibration._loop import SolverRuns
+    from surrogate.calibration._problem import CalibrationProblem
+    from surrogate.gp import CurveSurrogate
     from surrogate.study._measurements import load_measurements
     from surrogate.study._spec import load_study
 
     spec = load_study(_study(tmp_path, BASE_TESTS))
     problem = CalibrationProblem(spec, load_measurements(spec.measurements_file), ["tension"])
-    runs = _Runs(problem, tmp_path / "cache", jobs=1)
+    runs = SolverRuns(problem, tmp_path / "cache", jobs=1)
     X = problem.space.from_unit(np.random.default_rng(0).random((10, len(problem.space))))
     runs.run(X, [i % 2 for i in range(10)])
-    model = CurveSurrogate(problem).fit(
+    model = CurveSurrogate(problem.features, len(problem.groups)).fit(
         np.array(runs.X), np.array(runs.groups), np.array(runs.curves)
     )
     fast = model.predict(X[:3])

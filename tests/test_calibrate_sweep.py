@@ -18,7 +18,7 @@ import pytest
 
 import surrogate
 from surrogate import Rig
-from surrogate.calibration._loop import coat_section
+from surrogate.calibration._problem import coat_section
 from surrogate.calibration._synthetic import calibration_sets, write_calibration_study
 
 SETS = {case["name"]: case for case in calibration_sets()}

@@ -15,7 +15,7 @@ attached to the calibration's study for optuna-dashboard.
 
 from __future__ import annotations
 
-import sys
+import logging
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
@@ -26,20 +26,19 @@ import numpy as np
 import optuna
 
 from .._errors import InputDataError, SolverError
+from .._log import show_progress
 from ..physics import curve_features
-from ._loop import (
-    CalibrationProblem,
-    _load,
-    _Runs,
-    calibration_note,
-    calibration_study_name,
-    model_label,
-)
+from ..storage._optuna import quiet_optuna
+from ._loop import SolverRuns, calibration_note
+from ._problem import CalibrationProblem, calibration_study_name, load_calibration, model_label
+from ._statistics import column_values
 
-__all__ = ["CompareResult", "compare", "latest_calibration"]
+__all__ = ["BANDS", "CompareResult", "angle_bands", "compare", "latest_calibration"]
 
 BAND_HALF_WIDTH_DEG = 10.0
 BANDS = ("elastic rise", "transition", "plateau")
+
+_LOG = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -105,27 +104,64 @@ def compare(
         The model's effects; default: the study's ``[model] effects``.
     output_dir : path, optional
         Folder of the PNG plots; default ``<study folder>/<name>-compare``.
+    progress : bool
+        Log the summary at INFO (logger ``surrogate``; on stderr unless configured).
     """
-    spec, data, chosen, noise = _load(study, effects, plugins)
+    if progress:
+        show_progress()
+    spec, data, chosen, noise = load_calibration(study, effects, plugins)
     problem = CalibrationProblem(spec, data, chosen)
     url = storage or spec.default_storage()
     name = calibration_study_name(spec, chosen)
     stored = None if params is not None else latest_calibration(url, name)
     theta = _parameters(problem, params if stored is None else stored["params"], url, name)
-    runs = _Runs(problem, spec.directory / ".solver-cache", jobs=1)
+    curves = _model_curves(problem, theta)
+    residual = problem.residuals(curves)
+    tests = _per_test(problem, residual)
+    folder = Path(output_dir) if output_dir else spec.directory / f"{spec.name}-compare"
+    files = _plots(problem, curves, residual, tests, folder, chosen) if plots else []
+    rmse = float(np.sqrt(np.mean(residual**2)))
+    bands = _band_table(problem, curves, residual)
+    result = CompareResult(
+        params=dict(zip(problem.space.names, map(float, theta), strict=True)),
+        effects=list(chosen),
+        rmse_n=rmse,
+        noise_n=noise,
+        rmse_over_noise=rmse / noise,
+        tests=tests,
+        bands=bands,
+        covariates=_covariate_correlations(problem, tests),
+        plots=files,
+        calibration=_claims(stored),
+        study=name,
+        message=_message(chosen, rmse, noise, tests, bands, stored),
+    )
+    _attach(url, name, problem, curves, residual, tests, result, stored)
+    if progress:
+        _LOG.info("[%s] %s", name, result.message)
+    return result
+
+
+def _model_curves(problem: CalibrationProblem, theta: np.ndarray) -> np.ndarray:
+    """The full solver's curves (G, A) at ``theta`` for every condition group."""
+    runs = SolverRuns(problem, problem.spec.directory / ".solver-cache", jobs=1)
     G = len(problem.groups)
     out = runs.run(np.repeat(theta[None, :], G, axis=0), list(range(G)))
-    if any(o is None for o in out):
+    done = [o for o in out if o is not None]
+    if len(done) < len(out):
         raise SolverError(
             f"the full solver failed at these parameters ({runs.failures[0]}); "
             "compare needs a curve for every test"
         )
-    curves = np.array([o["curve"] for o in out])  # type: ignore[index]
-    residual = problem.residuals(curves)
-    rmse = float(np.sqrt(np.mean(residual**2)))
-    tests = _per_test(problem, residual)
-    band = _bands(problem, curves)
-    bands = [
+    return np.array([o.curve for o in done])
+
+
+def _band_table(
+    problem: CalibrationProblem, curves: np.ndarray, residual: np.ndarray
+) -> list[dict[str, Any]]:
+    """RMSE, bias and points of every angle band that has points."""
+    band = angle_bands(problem, curves)
+    return [
         {
             "band": label,
             "rmse_n": float(np.sqrt(np.mean(residual[band == i] ** 2))),
@@ -135,38 +171,30 @@ def compare(
         for i, label in enumerate(BANDS)
         if np.any(band == i)
     ]
-    covariates = _covariate_correlations(problem, tests)
-    files: list[str] = []
-    if plots:
-        folder = Path(output_dir) if output_dir else spec.directory / f"{spec.name}-compare"
-        files = _plots(problem, curves, residual, tests, folder, chosen)
+
+
+def _message(
+    effects: Sequence[str],
+    rmse: float,
+    noise: float,
+    tests: list[dict[str, Any]],
+    bands: list[dict[str, Any]],
+    stored: Mapping[str, Any] | None,
+) -> str:
     worst = max(tests, key=lambda t: t["rmse_n"])
-    message = (
-        f"{model_label(chosen)}: RMSE {rmse:.4g} N = {rmse / noise:.2f}× noise ({noise:.3g} N); "
+    return (
+        f"{model_label(effects)}: RMSE {rmse:.4g} N = {rmse / noise:.2f}× noise ({noise:.3g} N); "
         f"worst test {worst['test_id']} ({worst['rmse_n']:.3g} N); "
         + ", ".join(f"{b['band']} {b['rmse_n']:.3g} N" for b in bands)
         + _calibration_summary(stored)
     )
-    result = CompareResult(
-        params=dict(zip(problem.space.names, map(float, theta), strict=True)),
-        effects=list(chosen),
-        rmse_n=rmse,
-        noise_n=noise,
-        rmse_over_noise=rmse / noise,
-        tests=tests,
-        bands=bands,
-        covariates=covariates,
-        plots=files,
-        calibration=None
-        if stored is None
-        else {k: stored.get(k) for k in ("status", "misfit", "misfit_p_value", "determination")},
-        study=name,
-        message=message,
-    )
-    _attach(url, name, problem, curves, residual, tests, result, stored)
-    if progress:
-        print(f"[{name}] {message}", file=sys.stderr, flush=True)
-    return result
+
+
+def _claims(stored: Mapping[str, Any] | None) -> dict[str, Any] | None:
+    """What the stored calibration claims (``None`` for given parameters)."""
+    if stored is None:
+        return None
+    return {k: stored.get(k) for k in ("status", "misfit", "misfit_p_value", "determination")}
 
 
 def _calibration_summary(stored: Mapping[str, Any] | None) -> str:
@@ -224,7 +252,7 @@ def _per_test(problem: CalibrationProblem, residual: np.ndarray) -> list[dict[st
     return rows
 
 
-def _bands(problem: CalibrationProblem, curves: np.ndarray) -> np.ndarray:
+def angle_bands(problem: CalibrationProblem, curves: np.ndarray) -> np.ndarray:
     """Band index (0 rise, 1 transition, 2 plateau) of every measured point."""
     theta_sat = np.array(
         [
@@ -240,17 +268,6 @@ def _bands(problem: CalibrationProblem, curves: np.ndarray) -> np.ndarray:
     band[angle < at - BAND_HALF_WIDTH_DEG] = 0
     band[angle > at + BAND_HALF_WIDTH_DEG] = 2
     return band
-
-
-def column_values(values: list[Any]) -> np.ndarray | None:
-    """A table column as numbers: text levels in sorted order, else floats (None if mixed)."""
-    if all(isinstance(v, str) for v in values):
-        levels = sorted(set(values))
-        return np.array([levels.index(v) for v in values], dtype=float)
-    try:
-        return np.asarray(values, dtype=float)
-    except (TypeError, ValueError):
-        return None
 
 
 def _covariate_correlations(
@@ -274,6 +291,7 @@ def _plots(
     folder: Path,
     effects: Sequence[str],
 ) -> list[str]:
+    """The PNG figures in ``folder`` (none, with a warning, without matplotlib)."""
     try:
         import matplotlib
 
@@ -284,9 +302,19 @@ def _plots(
         return []
     folder.mkdir(parents=True, exist_ok=True)
     label = model_label(effects)
-    files = []
-    colours = plt.get_cmap("tab10")
+    files = [
+        _save(_curves_png(plt, problem, curves, label), folder / f"curves-{label}.png"),
+        _save(_residual_png(plt, problem, residual, label), folder / f"residual-angle-{label}.png"),
+    ]
+    if [*problem.data.conditions, *problem.data.covariates]:
+        figure = _covariates_png(plt, problem, tests, label)
+        files.append(_save(figure, folder / f"residual-covariates-{label}.png"))
+    return files
 
+
+def _curves_png(plt: Any, problem: CalibrationProblem, curves: np.ndarray, label: str) -> Any:
+    """Measured points and model curves of every test."""
+    colours = plt.get_cmap("tab10")
     figure, axis = plt.subplots(figsize=(8, 5.5))
     for index, test_id in enumerate(problem.test_ids):
         mask = problem.point_test == index
@@ -306,8 +334,12 @@ def _plots(
         title=f"Measured (dots) and model (lines), model: {label}",
     )
     axis.legend(fontsize=7, ncol=2)
-    files.append(_save(figure, folder / f"curves-{label}.png"))
+    return figure
 
+
+def _residual_png(plt: Any, problem: CalibrationProblem, residual: np.ndarray, label: str) -> Any:
+    """The residual of every test against the angle."""
+    colours = plt.get_cmap("tab10")
     figure, axis = plt.subplots(figsize=(8, 4.5))
     for index, test_id in enumerate(problem.test_ids):
         mask = problem.point_test == index
@@ -327,24 +359,27 @@ def _plots(
         title=f"Residual against angle, model: {label} (RMSE {rmse:.3g} N)",
     )
     axis.legend(fontsize=7, ncol=2)
-    files.append(_save(figure, folder / f"residual-angle-{label}.png"))
+    return figure
 
+
+def _covariates_png(
+    plt: Any, problem: CalibrationProblem, tests: list[dict[str, Any]], label: str
+) -> Any:
+    """Each test's mean residual (± its RMSE) against each condition and covariate."""
     columns = [*problem.data.conditions, *problem.data.covariates]
-    if columns:
-        figure, axes = plt.subplots(1, len(columns), figsize=(3.2 * len(columns), 3.4))
-        axes = np.atleast_1d(axes)
-        bias = [t["bias_n"] for t in tests]
-        rms = [t["rmse_n"] for t in tests]
-        for axis, column in zip(axes, columns, strict=True):
-            values = [t[column] for t in tests]
-            axis.errorbar(values, bias, yerr=rms, fmt="o", ms=4, capsize=2)
-            if column == "rate_deg_s":
-                axis.set_xscale("log")
-            axis.axhline(0.0, color="black", lw=0.8)
-            axis.set(xlabel=column, ylabel="mean residual ± RMSE [N]")
-        figure.suptitle(f"Residual per test against conditions and covariates ({label})")
-        files.append(_save(figure, folder / f"residual-covariates-{label}.png"))
-    return files
+    figure, axes = plt.subplots(1, len(columns), figsize=(3.2 * len(columns), 3.4))
+    axes = np.atleast_1d(axes)
+    bias = [t["bias_n"] for t in tests]
+    rms = [t["rmse_n"] for t in tests]
+    for axis, column in zip(axes, columns, strict=True):
+        values = [t[column] for t in tests]
+        axis.errorbar(values, bias, yerr=rms, fmt="o", ms=4, capsize=2)
+        if column == "rate_deg_s":
+            axis.set_xscale("log")
+        axis.axhline(0.0, color="black", lw=0.8)
+        axis.set(xlabel=column, ylabel="mean residual ± RMSE [N]")
+    figure.suptitle(f"Residual per test against conditions and covariates ({label})")
+    return figure
 
 
 def _save(figure: Any, path: Path) -> str:
@@ -375,8 +410,20 @@ def _attach(
         from optuna_dashboard import save_note, save_plotly_graph_object
     except ImportError:
         return
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    quiet_optuna()
     study = optuna.create_study(study_name=name, storage=url, load_if_exists=True)
+    figure = _curves_plotly(go, problem, curves)
+    save_plotly_graph_object(study, figure, graph_object_id="compare-curves")
+    figure = _residual_plotly(go, problem, residual)
+    save_plotly_graph_object(study, figure, graph_object_id="compare-residual-angle")
+    columns = [*problem.data.conditions, *problem.data.covariates]
+    if columns:
+        figure = _covariates_plotly(go, columns, tests)
+        save_plotly_graph_object(study, figure, graph_object_id="compare-residual-covariates")
+    save_note(study, "\n".join(_note_lines(tests, result, stored)))
+
+
+def _curves_plotly(go: Any, problem: CalibrationProblem, curves: np.ndarray) -> Any:
     figure = go.Figure()
     for index, test_id in enumerate(problem.test_ids):
         mask = problem.point_test == index
@@ -404,7 +451,10 @@ def _attach(
         xaxis_title="fixture rotation [deg]",
         yaxis_title="probe force [N]",
     )
-    save_plotly_graph_object(study, figure, graph_object_id="compare-curves")
+    return figure
+
+
+def _residual_plotly(go: Any, problem: CalibrationProblem, residual: np.ndarray) -> Any:
     figure = go.Figure()
     for index, test_id in enumerate(problem.test_ids):
         mask = problem.point_test == index
@@ -418,25 +468,32 @@ def _attach(
         xaxis_title="fixture rotation [deg]",
         yaxis_title="residual [N]",
     )
-    save_plotly_graph_object(study, figure, graph_object_id="compare-residual-angle")
-    columns = [*problem.data.conditions, *problem.data.covariates]
-    if columns:
-        figure = go.Figure()
-        for column in columns:
-            figure.add_trace(
-                go.Scatter(
-                    x=[t[column] for t in tests],
-                    y=[t["bias_n"] for t in tests],
-                    mode="markers",
-                    name=column,
-                    text=[t["test_id"] for t in tests],
-                )
+    return figure
+
+
+def _covariates_plotly(go: Any, columns: Sequence[str], tests: list[dict[str, Any]]) -> Any:
+    figure = go.Figure()
+    for column in columns:
+        figure.add_trace(
+            go.Scatter(
+                x=[t[column] for t in tests],
+                y=[t["bias_n"] for t in tests],
+                mode="markers",
+                name=column,
+                text=[t["test_id"] for t in tests],
             )
-        figure.update_layout(
-            title="Mean residual per test against each condition and covariate",
-            yaxis_title="mean residual [N]",
         )
-        save_plotly_graph_object(study, figure, graph_object_id="compare-residual-covariates")
+    figure.update_layout(
+        title="Mean residual per test against each condition and covariate",
+        yaxis_title="mean residual [N]",
+    )
+    return figure
+
+
+def _note_lines(
+    tests: list[dict[str, Any]], result: CompareResult, stored: Mapping[str, Any] | None
+) -> list[str]:
+    """The dashboard note: the calibration's statement (if stored), then the comparison."""
     lines = [
         f"## Compare: {result.message}",
         "",
@@ -450,4 +507,4 @@ def _attach(
     ]
     if stored is not None:
         lines = [*calibration_note(stored), "", *lines]
-    save_note(study, "\n".join(lines))
+    return lines

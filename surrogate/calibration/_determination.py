@@ -111,29 +111,75 @@ def determine(
         ``"bending_stiffness_nmm": ("D ∝ Ecoat·Tcoat", D)``.
     """
     log = np.asarray(log, bool)
-
-    def to_z(values: np.ndarray) -> np.ndarray:
-        return np.where(log, np.log(np.where(log, values, 1.0)), values)
-
-    z_low = to_z(low)
-    span = to_z(high) - z_low
-    z = to_z(theta)
+    z_low, z = _to_z(low, log), _to_z(theta, log)
+    span = _to_z(high, log) - z_low
     free_index = np.flatnonzero(np.asarray(at_bound) == 0)
-    jac_z = jacobian_unit[:, free_index] / span[free_index]
-    n, p_free = residual.size, free_index.size
-    dof = max(n - p_free, 1)
-    sigma = math.sqrt(float(residual @ residual) / dof)
+    dof = max(residual.size - free_index.size, 1)
+    covariance = _Covariance.of(jacobian_unit[:, free_index] / span[free_index], residual, dof)
     t = float(stats.t.ppf(0.5 + LEVEL / 2, dof))
-    eigenvalues, vectors = np.linalg.eigh(jac_z.T @ jac_z)
-    determined = eigenvalues > NULL_EIGENVALUE * max(float(eigenvalues.max(initial=0.0)), 1e-300)
+    intervals, free, held = _intervals(names, z, z_low, span, log, free_index, covariance, t)
+    found = {
+        key: _combination(function, names, z, log, free_index, covariance.sd, t)
+        for key, (_, function) in combinations.items()
+    }
+    labels = {key: label for key, (label, _) in combinations.items()}
+    statement = _statement(names, theta, intervals, found, labels, free, held, at_bound)
+    return Determination(
+        sigma_n=covariance.sigma,
+        dof=dof,
+        combinations=found,
+        intervals=intervals,
+        free=free,
+        held_at_bound=held,
+        directions=_directions(names, free_index, covariance, t),
+        statement=statement,
+    )
 
-    def sd_of(gradient_free: np.ndarray) -> float:
+
+def _to_z(values: np.ndarray, log: np.ndarray) -> np.ndarray:
+    """Values in the declared scale ``z`` (``log θ`` where log-scaled)."""
+    return np.where(log, np.log(np.where(log, values, 1.0)), values)
+
+
+@dataclass(frozen=True)
+class _Covariance:
+    """``C = s² (J_zᵀ J_z)⁻¹`` over the free parameters, by its eigen-decomposition."""
+
+    sigma: float
+    eigenvalues: np.ndarray
+    vectors: np.ndarray
+    determined: np.ndarray  # eigen-directions the curves determine at all
+
+    @classmethod
+    def of(cls, jac_z: np.ndarray, residual: np.ndarray, dof: int) -> _Covariance:
+        sigma = math.sqrt(float(residual @ residual) / dof)
+        eigenvalues, vectors = np.linalg.eigh(jac_z.T @ jac_z)
+        largest = max(float(eigenvalues.max(initial=0.0)), 1e-300)
+        return cls(sigma, eigenvalues, vectors, eigenvalues > NULL_EIGENVALUE * largest)
+
+    def sd(self, gradient_free: np.ndarray) -> float:
         """Standard deviation of ``gradient · z`` (inf along an undetermined direction)."""
-        loads = vectors.T @ gradient_free
+        loads = self.vectors.T @ gradient_free
+        determined = self.determined
         if np.any(np.abs(loads[~determined]) > 1e-9 * max(np.abs(loads).max(), 1e-300)):
             return math.inf
-        return sigma * math.sqrt(float(np.sum(loads[determined] ** 2 / eigenvalues[determined])))
+        return self.sigma * math.sqrt(
+            float(np.sum(loads[determined] ** 2 / self.eigenvalues[determined]))
+        )
 
+
+def _intervals(
+    names: Sequence[str],
+    z: np.ndarray,
+    z_low: np.ndarray,
+    span: np.ndarray,
+    log: np.ndarray,
+    free_index: np.ndarray,
+    covariance: _Covariance,
+    t: float,
+) -> tuple[dict[str, list[float] | None], list[str], list[str]]:
+    """The 95 % interval of each parameter (None where held at a bound), the free
+    parameters and those held at a bound."""
     intervals: dict[str, list[float] | None] = {}
     free, held = [], []
     position = {int(k): i for i, k in enumerate(free_index)}
@@ -142,21 +188,30 @@ def determine(
             held.append(name)
             intervals[name] = None
             continue
-        half = t * sd_of(np.eye(p_free)[position[k]])
+        half = t * covariance.sd(np.eye(free_index.size)[position[k]])
         if 2 * half >= FREE_SHARE * span[k]:
             free.append(name)
             half = math.inf
         # clipped to the declared range: what the study already knew
         edges = np.clip(z[k] + np.array([-half, half]), z_low[k], z_low[k] + span[k])
         intervals[name] = [float(v) for v in (np.exp(edges) if log[k] else edges)]
-    found = {
-        key: _combination(function, names, z, log, free_index, sd_of, t)
-        for key, (_, function) in combinations.items()
-    }
+    return intervals, free, held
+
+
+def _directions(
+    names: Sequence[str], free_index: np.ndarray, covariance: _Covariance, t: float
+) -> list[dict[str, Any]]:
+    """Eigen-directions of the covariance, best determined first: 95 % half-width in ``z``
+    (None: not determined) and weights (largest ±1)."""
     directions = []
-    for index in np.argsort(-eigenvalues):
-        weights = vectors[:, index] / np.max(np.abs(vectors[:, index]))
-        width = t * sigma / math.sqrt(eigenvalues[index]) if determined[index] else None
+    for index in np.argsort(-covariance.eigenvalues):
+        vector = covariance.vectors[:, index]
+        weights = vector / np.max(np.abs(vector))
+        width = (
+            t * covariance.sigma / math.sqrt(covariance.eigenvalues[index])
+            if covariance.determined[index]
+            else None
+        )
         directions.append(
             {
                 "half_width": width,
@@ -165,18 +220,7 @@ def determine(
                 },
             }
         )
-    labels = {key: label for key, (label, _) in combinations.items()}
-    statement = _statement(names, theta, intervals, found, labels, free, held, at_bound)
-    return Determination(
-        sigma_n=sigma,
-        dof=dof,
-        combinations=found,
-        intervals=intervals,
-        free=free,
-        held_at_bound=held,
-        directions=directions,
-        statement=statement,
-    )
+    return directions
 
 
 def _combination(

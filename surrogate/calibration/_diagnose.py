@@ -31,46 +31,57 @@
    ``hardening`` and ``membrane_bending`` are the same moment–curvature law).
    When none brings the error near the noise level, the column the residual
    follows is named instead.
+
+The statistics (F-tests, the regressions, the verdict rules) are
+:mod:`._statistics`'s; this module runs the calibrations and refits they judge.
 """
 
 from __future__ import annotations
 
+import logging
 import math
-import multiprocessing
-import os
-import sys
-from collections.abc import Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import optuna
-from scipy import stats
 
 from .._errors import InputDataError
+from .._log import show_progress
+from .._pool import imap_unordered, worker_count
 from ..effects import available_effects, get_effect
-from ._compare import BANDS, _bands, column_values
+from ..storage._optuna import quiet_optuna
+from ._compare import BANDS, angle_bands
 from ._local import ResidualModel, SolverFailed, local_fit
-from ._loop import (
+from ._loop import SolverRuns, calibrate, calibration_note
+from ._problem import (
     CalibrationProblem,
-    _load,
-    _Runs,
-    calibrate,
-    calibration_note,
     calibration_study_name,
+    check_jobs,
+    load_calibration,
     model_label,
 )
-from ._statistics import SIGNIFICANCE, bic, misfit_p_value, noise_dof
+from ._statistics import (
+    SIGNIFICANCE,
+    Candidate,
+    bic,
+    failing_cells,
+    misfit_p_value,
+    named,
+    noise_dof,
+    residual_follows,
+    tied,
+    verdict,
+)
 
-__all__ = ["DiagnosisResult", "diagnose", "model_ladder"]
+__all__ = ["DiagnosisResult", "diagnose", "model_ladder", "write_ladder_plot"]
 
-DECISIVE_DELTA_BIC = -10.0  # "very strong" evidence (Kass & Raftery 1995)
-HELDOUT_GAIN = 0.9  # a named effect cuts the held-out RMSE by ≥ 10 %
-NEAR_NOISE = 1.3  # an RMSE within 1.3× noise is explained
 _LOCAL_EVALS = 40  # residual evaluations of one local refit (each G solver runs)
 LOO_PRIOR_UNIT = 0.05  # prior SD of a parameter in the held-out refits, fraction of its range
+
+_LOG = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -122,111 +133,239 @@ def diagnose(
     candidates : sequence of str, optional
         Effects to try (default: every registered effect not in the model).
     jobs : int, optional
-        Processes for the local refits (default: the machine's CPUs).
+        Processes for the local refits, ≥ 1 (default: the machine's CPUs).
+    progress : bool
+        Log each step at INFO (logger ``surrogate``; on stderr unless configured).
     """
-    _jobs(jobs, 1)  # a bad value fails before any work
-    spec, data, chosen, noise = _load(study, effects, plugins)
+    check_jobs(jobs, all_cpus=True)  # a bad value fails before any work
+    if progress:
+        show_progress()
+    spec, data, chosen, noise = load_calibration(study, effects, plugins)
     url = storage or spec.default_storage()
-    say = _Say(progress, f"{spec.name}/diagnose")
     fitted = calibrate(spec, effects=chosen, storage=url, progress=progress)
     problem = CalibrationProblem(spec, data, chosen)
-    names = _candidates(problem, chosen, candidates)
-    # the current model gets the same local refit as every candidate, so ΔBIC compares
-    # like with like; the refits are independent, one process each
-    tasks = [(spec, data, chosen, None, fitted.params, noise)]
-    tasks += [(spec, data, (*chosen, name), name, fitted.params, noise) for name in names]
-    say(f"refitting the model and {len(names)} candidate effects locally with the full solver")
-    refits: dict[str | None, _Refit] = {}
-    for refit in _map(_refit, tasks, _jobs(jobs, len(tasks))):
-        refits[refit.effect] = refit
-        if refit.effect is not None:
-            say(f"+ {refit.effect}: RMSE {refit.rmse:.4g} N, held-out {refit.heldout_rmse:.4g} N")
-    current = refits[None]
-    theta = current.theta
-    dof_noise = noise_dof(spec.noise_n is not None, data.noise_dof)
-    n_points = problem.n_points
+    say = _Say(progress, f"{spec.name}/diagnose")
+    refits = _Refits(problem, chosen, noise, fitted.params, jobs=jobs, say=say)
+    refits.refit_all(_candidates(problem, chosen, candidates))
+    misfit = _misfit(problem, refits.current, noise)
+    say(
+        f"model {model_label(chosen)}: RMSE {misfit.rmse:.4g} N, noise {noise:.4g} N, "
+        f"{'systematic' if misfit.systematic else 'within the noise'} "
+        f"(p = {misfit.p_value:.2g})"
+    )
+    ranking = refits.ranking()
+    if misfit.systematic and ranking:
+        ranking = refits.recalibrate(ranking)
+    name = calibration_study_name(spec, chosen)
+    _record_heldout(url, name, refits.current.heldout_rmse)
+    result = _result(misfit, ranking, refits, fitted.solver_calls, model_ladder(url, spec.name))
+    _attach_ladder(url, name, result, fitted.to_json())
+    say(result.verdict)
+    return result
+
+
+@dataclass(frozen=True)
+class _Misfit:
+    """The current model's misfit against the noise: how large, where, what it follows."""
+
+    rmse: float
+    noise: float
+    p_value: float
+    systematic: bool
+    where: list[dict[str, Any]]
+    follows: list[dict[str, Any]]
+
+
+def _misfit(problem: CalibrationProblem, current: _Refit, noise: float) -> _Misfit:
+    """F-test of the current model's local refit against the noise, per cell and overall,
+    and the columns its residual follows."""
+    dof_noise = noise_dof(problem.spec.noise_n is not None, problem.data.noise_dof)
     residual = current.residual
     rss = float(residual @ residual)
-    rmse = math.sqrt(rss / problem.n_points)
-    p_value = misfit_p_value(rss, n_points - len(theta), noise, dof_noise)
-    systematic = p_value < SIGNIFICANCE
-    where = _where(problem, residual, current.curves, noise, dof_noise)
-    follows = _follows(problem, residual, noise)
-    say(
-        f"model {model_label(chosen)}: RMSE {rmse:.4g} N, noise {noise:.4g} N, "
-        f"{'systematic' if systematic else 'within the noise'} (p = {p_value:.2g})"
-    )
-    ranking = []
-    base_bic = bic(rss, n_points, len(theta))
-    used = set(current.used)
-    solver_calls = fitted.solver_calls
-
-    def entry_of(name: str, fit: _Refit) -> dict[str, Any]:
-        fit_rss = float(fit.residual @ fit.residual)
-        return {
-            "effect": name,
-            "rmse_n": math.sqrt(fit_rss / n_points),
-            "heldout_rmse_n": fit.heldout_rmse,
-            "delta_bic": bic(fit_rss, n_points, len(fit.theta)) - base_bic,
-            "params": fit.params,
-        }
-
-    for name in names:
-        used |= refits[name].used
-        ranking.append(entry_of(name, refits[name]))
-    ranking.sort(key=lambda e: e["delta_bic"])
-    if systematic and ranking:
-        # A local refit stays in the basin of the current model's optimum (the coat's
-        # third parameter can sit in another; a compliant clamp needs a much stiffer
-        # coat than the model without it found). So the leaders are recalibrated over
-        # the whole space — and, before the verdict can be "unexplained", every other
-        # candidate too.
-        leaders = [e["effect"] for e in ranking if _tied(e, ranking[0])]
-        done: set[str] = set()
-        for names_now in (leaders, [e["effect"] for e in ranking]):
-            todo = [name for name in names_now if name not in done]
-            if not todo or (done and _named(ranking[0], current.heldout_rmse, noise)):
-                continue
-            say(f"recalibrating with {', '.join(todo)} over the whole parameter space")
-            tasks = [(spec, data, (*chosen, name), name, noise) for name in todo]
-            for again, calls in _map(_recalibrate, tasks, _jobs(jobs, len(tasks))):
-                solver_calls += calls
-                if again is None:
-                    continue
-                used |= again.used
-                if again.rmse < refits[again.effect].rmse:
-                    refits[again.effect] = again
-            done.update(todo)
-            ranking = sorted(
-                (entry_of(e["effect"], refits[e["effect"]]) for e in ranking),
-                key=lambda e: e["delta_bic"],
-            )
-    # candidates not decisively worse than the best: the data cannot tell them apart
-    tied = [e["effect"] for e in ranking[1:] if _tied(e, ranking[0])]
-    named = systematic and bool(ranking) and _named(ranking[0], current.heldout_rmse)
-    unexplained, verdict = _verdict(
-        rmse, current.heldout_rmse, noise, systematic, p_value, ranking, follows, tied
-    )
-    _record_heldout(url, calibration_study_name(spec, chosen), current.heldout_rmse)
-    result = DiagnosisResult(
-        rmse_n=rmse,
-        noise_n=noise,
-        systematic=systematic,
+    p_value = misfit_p_value(rss, problem.n_points - len(current.theta), noise, dof_noise)
+    table = problem.data.tests.set_index("test_id")
+    columns = {
+        column: [table.loc[t, column] for t in problem.test_ids]
+        for column in (*problem.data.conditions, *problem.data.covariates)
+    }
+    return _Misfit(
+        rmse=math.sqrt(rss / problem.n_points),
+        noise=noise,
         p_value=p_value,
-        where=where,
-        follows=follows,
-        ranking=ranking,
-        tied_with=tied if named else [],
-        unexplained=unexplained,
-        verdict=verdict,
-        effects=list(chosen),
-        heldout_rmse_n=current.heldout_rmse,
-        solver_calls=solver_calls + len(used),
-        ladder=model_ladder(url, spec.name),
+        systematic=p_value < SIGNIFICANCE,
+        where=failing_cells(_cells(problem, current.curves), residual, noise, dof_noise),
+        follows=residual_follows(
+            residual,
+            problem.point_test,
+            problem.point_angle_deg,
+            columns,
+            noise,
+            n_tests=len(problem.test_ids),
+        ),
     )
-    _attach_ladder(url, calibration_study_name(spec, chosen), result, fitted.to_json())
-    say(verdict)
-    return result
+
+
+def _cells(problem: CalibrationProblem, curves: np.ndarray) -> list[tuple[str, str, np.ndarray]]:
+    """Where to look for a misfit: every test, angle band and value of a varying condition
+    (kind, name, mask of the measured points)."""
+    cells: list[tuple[str, str, np.ndarray]] = []
+    for index, test_id in enumerate(problem.test_ids):
+        cells.append(("test", str(test_id), problem.point_test == index))
+    band = angle_bands(problem, curves)
+    for index, label in enumerate(BANDS):
+        if np.any(band == index):
+            cells.append(("angle band", label, band == index))
+    table = problem.data.tests.set_index("test_id")
+    for column in problem.data.conditions:
+        values = [table.loc[t, column] for t in problem.test_ids]
+        if len(set(values)) < 2:
+            continue
+        for value in sorted(set(values), key=str):
+            tests = [i for i, v in enumerate(values) if v == value]
+            cells.append((column, str(value), np.isin(problem.point_test, tests)))
+    return cells
+
+
+def _result(
+    misfit: _Misfit,
+    ranking: list[Candidate],
+    refits: _Refits,
+    calibration_calls: int,
+    ladder: list[dict[str, Any]],
+) -> DiagnosisResult:
+    """The verdict over the ranked candidates, as the command's record."""
+    heldout = refits.current.heldout_rmse
+    # candidates not decisively worse than the best: the data cannot tell them apart
+    tied_with = [c.effect for c in ranking[1:] if tied(c, ranking[0])]
+    is_named = misfit.systematic and bool(ranking) and named(ranking[0], heldout)
+    unexplained, text = verdict(
+        misfit.rmse,
+        heldout,
+        misfit.noise,
+        misfit.systematic,
+        misfit.p_value,
+        ranking,
+        misfit.follows,
+        tied_with,
+    )
+    return DiagnosisResult(
+        rmse_n=misfit.rmse,
+        noise_n=misfit.noise,
+        systematic=misfit.systematic,
+        p_value=misfit.p_value,
+        where=misfit.where,
+        follows=misfit.follows,
+        ranking=[c.to_json() for c in ranking],
+        tied_with=tied_with if is_named else [],
+        unexplained=unexplained,
+        verdict=text,
+        effects=list(refits.chosen),
+        heldout_rmse_n=heldout,
+        solver_calls=calibration_calls + refits.solver_calls + len(refits.used),
+        ladder=ladder,
+    )
+
+
+# -- local refits with the full solver -----------------------------------------------------------
+class _Refits:
+    """Local refits of the current model and of it plus each candidate effect (in
+    parallel processes), the recalibrations of the leaders, and the solver runs they used.
+
+    ``refits`` maps an effect (``None``: the current model) to its best refit so far;
+    ``used`` is every result-cache key the refits ran; ``solver_calls`` the runs of the
+    recalibrations over the whole space.
+    """
+
+    def __init__(
+        self,
+        problem: CalibrationProblem,
+        chosen: tuple[str, ...],
+        noise: float,
+        params: dict[str, float],
+        *,
+        jobs: int | None,
+        say: _Say,
+    ) -> None:
+        self.problem, self.chosen, self.noise, self.params = problem, chosen, noise, params
+        self.jobs, self.say = jobs, say
+        self.refits: dict[str | None, _Refit] = {}
+        self.names: list[str] = []
+        self.used: set[str] = set()
+        self.solver_calls = 0
+
+    @property
+    def current(self) -> _Refit:
+        return self.refits[None]
+
+    def refit_all(self, names: Sequence[str]) -> None:
+        """The current model and each candidate, refitted locally from the calibrated point."""
+        # the current model gets the same local refit as every candidate, so ΔBIC compares
+        # like with like; the refits are independent, one process each
+        spec, data, noise = self.problem.spec, self.problem.data, self.noise
+        self.names = list(names)
+        tasks: list[tuple[Any, ...]] = [(spec, data, self.chosen, None, self.params, noise)]
+        tasks += [(spec, data, (*self.chosen, n), n, self.params, noise) for n in names]
+        self.say(
+            f"refitting the model and {len(names)} candidate effects locally with the full solver"
+        )
+        for _, refit in imap_unordered(_refit, tasks, worker_count(self.jobs, len(tasks))):
+            self.refits[refit.effect] = refit
+            self.used |= refit.used
+            if refit.effect is not None:
+                self.say(
+                    f"+ {refit.effect}: RMSE {refit.rmse:.4g} N, "
+                    f"held-out {refit.heldout_rmse:.4g} N"
+                )
+
+    def ranking(self) -> list[Candidate]:
+        """The candidates by ΔBIC against the current model, best first."""
+        return sorted((self._entry(name) for name in self.names), key=lambda c: c.delta_bic)
+
+    def _entry(self, name: str) -> Candidate:
+        n_points, current, fit = self.problem.n_points, self.current, self.refits[name]
+        base_bic = bic(float(current.residual @ current.residual), n_points, len(current.theta))
+        fit_rss = float(fit.residual @ fit.residual)
+        return Candidate(
+            effect=name,
+            rmse_n=math.sqrt(fit_rss / n_points),
+            heldout_rmse_n=fit.heldout_rmse,
+            delta_bic=bic(fit_rss, n_points, len(fit.theta)) - base_bic,
+            params=fit.params,
+        )
+
+    def recalibrate(self, ranking: list[Candidate]) -> list[Candidate]:
+        """The leaders recalibrated over the whole space — and, before the verdict can be
+        "unexplained", every other candidate too; the ranking again.
+
+        A local refit stays in the basin of the current model's optimum (the coat's
+        third parameter can sit in another; a compliant clamp needs a much stiffer
+        coat than the model without it found).
+        """
+        leaders = [c.effect for c in ranking if tied(c, ranking[0])]
+        everyone = [c.effect for c in ranking]
+        done: set[str] = set()
+        for names_now in (leaders, everyone):
+            todo = [name for name in names_now if name not in done]
+            if not todo or (done and named(ranking[0], self.current.heldout_rmse, self.noise)):
+                continue
+            self._recalibrate_all(todo)
+            done.update(todo)
+            ranking = sorted((self._entry(c.effect) for c in ranking), key=lambda c: c.delta_bic)
+        return ranking
+
+    def _recalibrate_all(self, names: list[str]) -> None:
+        self.say(f"recalibrating with {', '.join(names)} over the whole parameter space")
+        spec, data = self.problem.spec, self.problem.data
+        tasks = [(spec, data, (*self.chosen, name), name, self.noise) for name in names]
+        for _, (again, calls) in imap_unordered(
+            _recalibrate, tasks, worker_count(self.jobs, len(tasks))
+        ):
+            self.solver_calls += calls
+            if again is None:
+                continue
+            self.used |= again.used
+            if again.rmse < self.refits[again.effect].rmse:
+                self.refits[again.effect] = again
 
 
 def _attach_ladder(
@@ -275,113 +414,17 @@ def _attach_ladder(
 
 
 class _Say:
+    """Progress of the diagnosis at INFO, when asked for."""
+
     def __init__(self, on: bool, label: str) -> None:
         self.on, self.label = on, label
 
     def __call__(self, text: str) -> None:
         if self.on:
-            print(f"[{self.label}] {text}", file=sys.stderr, flush=True)
+            _LOG.info("[%s] %s", self.label, text)
 
 
-# -- where the model fails ----------------------------------------------------------------------
-def _where(
-    problem: CalibrationProblem,
-    residual: np.ndarray,
-    curves: np.ndarray,
-    noise: float,
-    dof_noise: float,
-) -> list[dict[str, Any]]:
-    """Cells (tests, angle bands, condition values) whose misfit the noise does not explain."""
-    cells: list[tuple[str, str, np.ndarray]] = []
-    for index, test_id in enumerate(problem.test_ids):
-        cells.append(("test", str(test_id), problem.point_test == index))
-    band = _bands(problem, curves)
-    for index, label in enumerate(BANDS):
-        if np.any(band == index):
-            cells.append(("angle band", label, band == index))
-    table = problem.data.tests.set_index("test_id")
-    for column in problem.data.conditions:
-        values = [table.loc[t, column] for t in problem.test_ids]
-        if len(set(values)) < 2:
-            continue
-        for value in sorted(set(values), key=str):
-            tests = [i for i, v in enumerate(values) if v == value]
-            cells.append((column, str(value), np.isin(problem.point_test, tests)))
-    found = []
-    for kind, name, mask in cells:
-        r = residual[mask]
-        p = misfit_p_value(float(r @ r), r.size, noise, dof_noise)
-        if p * len(cells) < SIGNIFICANCE:
-            found.append(
-                {
-                    "kind": kind,
-                    "name": name,
-                    "rmse_n": float(np.sqrt(np.mean(r**2))),
-                    "bias_n": float(np.mean(r)),
-                    "p_value": min(1.0, p * len(cells)),
-                }
-            )
-    return sorted(found, key=lambda c: -c["rmse_n"])
-
-
-def _numeric(values: list[Any], column: str) -> np.ndarray | None:
-    """:func:`column_values`, with the rate on a log scale (the rate effect's own axis)."""
-    x = column_values(values)
-    if x is None or column != "rate_deg_s" or np.any(x <= 0):
-        return x
-    return np.log(x)
-
-
-def _follows(
-    problem: CalibrationProblem, residual: np.ndarray, noise: float
-) -> list[dict[str, Any]]:
-    """Which columns the residual follows, strongest first (Bonferroni-corrected p).
-
-    Each column in turn: a weighted regression of the tests' mean residual on it
-    (weights: the tests' point counts), F-tested against what it leaves unexplained
-    — or against the noise, whichever is larger — so a decoy that merely
-    correlates a little with the real cause is not reported while the misfit is
-    far above the noise. The angle: every residual on a cubic in the angle.
-    """
-    n_tests = len(problem.test_ids)
-    counts = np.bincount(problem.point_test, minlength=n_tests).astype(float)
-    bias = np.bincount(problem.point_test, residual, n_tests) / counts
-    table = problem.data.tests.set_index("test_id")
-    found = []
-    for column in (*problem.data.conditions, *problem.data.covariates):
-        x = _numeric([table.loc[t, column] for t in problem.test_ids], column)
-        if x is None or np.ptp(x) == 0 or n_tests < 3:
-            continue
-        design = np.column_stack([np.ones(n_tests), x])
-        found.append(_regression(column, design, bias, counts, noise))
-    angle = problem.point_angle_deg / 90.0
-    design = np.column_stack([np.ones_like(angle), angle, angle**2, angle**3])
-    found.append(_regression("angle_deg", design, residual, np.ones_like(residual), noise))
-    for entry in found:
-        entry["p_value"] = min(1.0, entry["p_value"] * len(found))
-        entry["significant"] = entry["p_value"] < SIGNIFICANCE
-    return sorted(found, key=lambda e: (e["p_value"], -e["f_stat"]))
-
-
-def _regression(
-    name: str, design: np.ndarray, y: np.ndarray, weights: np.ndarray, noise: float
-) -> dict[str, Any]:
-    """F-test of a weighted least-squares fit against a constant; noise as the floor."""
-    w = np.sqrt(weights)
-    coef, *_ = np.linalg.lstsq(design * w[:, None], y * w, rcond=None)
-    fitted = design @ coef
-    mean = np.average(y, weights=weights)
-    k = design.shape[1] - 1
-    explained = float(np.sum(weights * (fitted - mean) ** 2)) / k
-    dof = y.size - design.shape[1]
-    scatter = float(np.sum(weights * (y - fitted) ** 2)) / max(dof, 1)
-    f_stat = explained / max(scatter, noise**2)
-    p = float(stats.f.sf(f_stat, k, dof)) if dof > 0 else 1.0
-    return {"covariate": name, "p_value": p, "f_stat": f_stat, "slope_n": float(coef[1])}
-
-
-# -- local refits with the full solver -----------------------------------------------------------
-@dataclass
+@dataclass(frozen=True)
 class _Refit:
     """One model (the current one, ``effect=None``, or it plus a candidate) refitted locally."""
 
@@ -402,7 +445,7 @@ def _refit(task: tuple[Any, ...]) -> _Refit:
     """Refit ``effects`` locally from the calibrated point (a candidate starts switched off)."""
     spec, data, effects, effect, params, noise = task
     problem = CalibrationProblem(spec, data, effects)
-    runs = _Runs(problem, spec.directory / ".solver-cache", jobs=1)
+    runs = SolverRuns(problem, spec.directory / ".solver-cache", jobs=1)
     fit = _local_fit(problem, runs, _start(problem, params), noise=noise)
     return _Refit(
         effect,
@@ -425,60 +468,8 @@ def _recalibrate(task: tuple[Any, ...]) -> tuple[_Refit | None, int]:
         return None, 0  # the solver failed wherever the search looked: keep the local refit
 
 
-def _named(best: dict[str, Any], heldout: float, noise: float | None = None) -> bool:
-    """Decisive (ΔBIC < −10) and cuts the held-out error ≥ 10 %; with ``noise``: and
-    brings the RMSE near it (nothing left to look for)."""
-    decisive = (
-        best["delta_bic"] < DECISIVE_DELTA_BIC and best["heldout_rmse_n"] < HELDOUT_GAIN * heldout
-    )
-    return decisive and (noise is None or best["rmse_n"] <= NEAR_NOISE * noise)
-
-
-def _tied(entry: dict[str, Any], best: dict[str, Any]) -> bool:
-    """Not decisively worse than the best (ΔBIC within 10 of it)."""
-    return entry["delta_bic"] - best["delta_bic"] < -DECISIVE_DELTA_BIC
-
-
-def _jobs(jobs: int | None, tasks: int) -> int:
-    if jobs is not None and jobs < 1:
-        raise InputDataError(f"jobs must be ≥ 1, got {jobs}")
-    return max(1, min(jobs or os.cpu_count() or 1, tasks))
-
-
-def _one_blas_thread() -> None:
-    """Several processes each spinning a BLAS thread pool on the same cores run ~10× slower."""
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(1)
-
-
-def _map(function: Any, tasks: list[Any], jobs: int) -> Iterator[Any]:
-    """``function`` over ``tasks`` in ``jobs`` forked processes, yielding as each finishes.
-
-    Forked, so effects registered in this process (plug-ins, or in code) exist in
-    the workers too.
-    """
-    if jobs == 1:
-        yield from map(function, tasks)
-        return
-    if "fork" not in multiprocessing.get_all_start_methods():
-        yield from map(function, tasks)  # no fork (Windows): plug-ins would be lost; serially
-        return
-    context = multiprocessing.get_context("fork")
-    with ProcessPoolExecutor(
-        max_workers=jobs, mp_context=context, initializer=_one_blas_thread
-    ) as pool:
-        futures = [pool.submit(function, task) for task in tasks]
-        try:
-            for future in as_completed(futures):
-                yield future.result()
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-
-
 def _local_fit(
-    problem: CalibrationProblem, runs: _Runs, theta: np.ndarray, *, noise: float
+    problem: CalibrationProblem, runs: SolverRuns, theta: np.ndarray, *, noise: float
 ) -> _Fit:
     """The shared local phase from ``theta`` (looser tolerances, one round: a refit ranks
     candidates, it does not certify an optimum); LOO-test error of the linearised fit."""
@@ -579,57 +570,9 @@ def _start(problem: CalibrationProblem, params: dict[str, float]) -> np.ndarray:
     return np.array(values, dtype=float)
 
 
-def _verdict(
-    rmse: float,
-    heldout: float,
-    noise: float,
-    systematic: bool,
-    p_value: float,
-    ranking: list[dict[str, Any]],
-    follows: list[dict[str, Any]],
-    tied: Sequence[str] = (),
-) -> tuple[dict[str, Any] | None, str]:
-    trail = [f for f in follows if f["significant"]]
-    column = trail[0]["covariate"] if trail else None
-    if not systematic:
-        return None, (
-            f"no systematic misfit: RMSE {rmse:.3g} N is what noise {noise:.3g} N explains "
-            f"(p = {p_value:.2g}); no effect needed"
-        )
-    best = ranking[0] if ranking else None
-    named = best is not None and _named(best, heldout)
-    if named and best is not None:
-        why = f"residual follows {column}; " if column else ""
-        text = (
-            f"missing effect: {best['effect']} — {why}`{best['effect']}` cuts held-out RMSE "
-            f"from {heldout:.3g} N to {best['heldout_rmse_n']:.3g} N "
-            f"(ΔBIC {best['delta_bic']:.0f}), noise {noise:.3g} N"
-        )
-        if tied:
-            also = ", ".join(f"`{name}`" for name in tied)
-            text += (
-                f"; {also} {'fits' if len(tied) == 1 else 'fit'} as well (ΔBIC within "
-                f"{-DECISIVE_DELTA_BIC:.0f}): these data cannot tell them apart"
-            )
-        if best["rmse_n"] <= NEAR_NOISE * noise:
-            return None, text
-        text += "; a misfit remains after it"
-    if column is None:
-        return {"covariate": None}, (
-            f"unexplained: RMSE {rmse:.3g} N against noise {noise:.3g} N, and the residual "
-            "follows no recorded column; no effect in the library explains it"
-        )
-    unexplained = {"covariate": column, "p_value": trail[0]["p_value"]}
-    lead = text + ". " if named else ""
-    return unexplained, (
-        f"{lead}unexplained: residual follows {column}; no effect in the library explains "
-        "it — write a plug-in effect"
-    )
-
-
 # -- the model ladder ---------------------------------------------------------------------------
 def _record_heldout(url: str, name: str, heldout: float) -> None:
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    quiet_optuna()
     try:
         study = optuna.load_study(study_name=name, storage=url)
     except KeyError:

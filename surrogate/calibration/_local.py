@@ -143,7 +143,7 @@ class ResidualModel:
     ----------
     problem : CalibrationProblem
         Parameters, condition groups and measured points.
-    runs : _Runs
+    runs : SolverRuns
         Full-solver runs through the result cache (counts the runs used).
     budget : int, optional
         Most full-solver runs ``runs`` may have used; an evaluation that would
@@ -205,7 +205,7 @@ class ResidualModel:
             if any(o is None for o in out):
                 self._memo[key] = (self._failed_residual, None)
             else:
-                curves = np.array([o["curve"] for o in out])
+                curves = np.array([o.curve for o in out])
                 self._memo[key] = (self.problem.residuals(curves), curves)
         return self._memo[key]
 

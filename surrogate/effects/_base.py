@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from .._errors import InputDataError
-from ..study._rig import Rig
+from ..study import Rig
 
 __all__ = [
     "Effect",

@@ -8,10 +8,11 @@
   definition caps it.
 - The curve is modelled on a reduced basis: principal components of the
   training curves' logarithm (forces span decades, and on a log scale a curve
-  is its level plus a shape), enough for 99.999 % of their variance (at most
-  12 components), one GP per score; the force at 0° is zero by definition and
-  is not modelled. The sharp knee where a curve saturates is what the basis
-  truncates: a few per cent there, well under 1 % elsewhere.
+  is its level plus a shape), enough for 99.99 % of their variance
+  (``curve_variance``; at most 12 components, :class:`PrincipalBasis`), one GP
+  per score; the force at 0° is zero by definition and is not modelled. The
+  sharp knee where a curve saturates is what the basis truncates: a few per cent
+  there, well under 1 % elsewhere.
 
 All three share the features of :class:`FeatureMap`. Follows scikit-learn's
 estimator contract: ``__init__`` stores arguments, ``fit`` validates and returns
@@ -29,6 +30,7 @@ import numpy as np
 from .._errors import InputDataError
 from .._io import atomic_write_text
 from ..study._space import ParameterSpace
+from ._basis import PrincipalBasis
 from ._features import FeatureMap
 from ._output import OutputGP
 
@@ -37,6 +39,7 @@ __all__ = ["CoatingSurrogate", "cross_validation_table"]
 FORMAT = "webbing-surrogate/gp"
 THETA_GRID_SD_DEG = 1.0 / np.sqrt(12.0)
 F60_RELATIVE_SD = 1e-3  # the solver's discretisation error is ~3e-4
+MAX_CURVE_COMPONENTS = 12
 
 
 class CoatingSurrogate:
@@ -126,14 +129,24 @@ class CoatingSurrogate:
         if np.any(curves[:, loaded] <= 0.0):
             raise InputDataError("curve forces must be > 0 at every angle > 0")
         log_curves = np.log(curves[:, loaded])
-        mean = log_curves.mean(axis=0)
-        _, singular, basis = np.linalg.svd(log_curves - mean, full_matrices=False)
-        explained = np.cumsum(singular**2) / max(np.sum(singular**2), 1e-300)
-        k = int(min(np.searchsorted(explained, self.curve_variance) + 1, basis.shape[0], 12))
+        self.curve_pca_ = PrincipalBasis.fit(
+            log_curves, variance=self.curve_variance, max_components=MAX_CURVE_COMPONENTS
+        )
         self.angle_deg_, self.curves_train_ = angles, curves
-        self.curve_mean_, self.curve_basis_ = mean, basis[:k]
-        scores = (log_curves - mean) @ self.curve_basis_.T
-        self.curve_gps_ = [self._gp(0.0).fit(Z, scores[:, j]) for j in range(k)]
+        scores = self.curve_pca_.project(log_curves)
+        self.curve_gps_ = [
+            self._gp(0.0).fit(Z, scores[:, j]) for j in range(self.curve_pca_.n_components)
+        ]
+
+    @property
+    def curve_mean_(self) -> np.ndarray:
+        """Mean log-curve (m_loaded,) of the basis."""
+        return self.curve_pca_.mean
+
+    @property
+    def curve_basis_(self) -> np.ndarray:
+        """Principal components (k, m_loaded) of the log-curves."""
+        return self.curve_pca_.basis
 
     # -- prediction ------------------------------------------------------------------------
     def predict(self, X: np.ndarray, return_std: bool = False) -> dict[str, np.ndarray]:
@@ -161,10 +174,10 @@ class CoatingSurrogate:
         scores, var = np.column_stack(means), np.column_stack(variances)
         loaded = self.angle_deg_ > 0.0
         curve = np.zeros((scores.shape[0], self.angle_deg_.size))
-        curve[:, loaded] = np.exp(self.curve_mean_ + scores @ self.curve_basis_)
+        curve[:, loaded] = np.exp(self.curve_pca_.reconstruct(scores))
         if return_std:
             std = np.zeros_like(curve)
-            std[:, loaded] = curve[:, loaded] * np.sqrt(var @ self.curve_basis_**2)
+            std[:, loaded] = curve[:, loaded] * np.sqrt(self.curve_pca_.reconstruct_variance(var))
             return curve, std
         return curve
 
@@ -263,10 +276,11 @@ class CoatingSurrogate:
             model.angle_deg_ = np.asarray(train["angle_deg"], dtype=float)
             curves = np.asarray(train["curves"], dtype=float)
             model.curves_train_ = curves
-            model.curve_mean_ = np.asarray(outputs["curve"]["mean"], dtype=float)
-            model.curve_basis_ = np.asarray(outputs["curve"]["basis"], dtype=float)
-            log_curves = np.log(curves[:, model.angle_deg_ > 0.0])
-            scores = (log_curves - model.curve_mean_) @ model.curve_basis_.T
+            model.curve_pca_ = PrincipalBasis(
+                np.asarray(outputs["curve"]["mean"], dtype=float),
+                np.asarray(outputs["curve"]["basis"], dtype=float),
+            )
+            scores = model.curve_pca_.project(np.log(curves[:, model.angle_deg_ > 0.0]))
             model.curve_gps_ = [
                 OutputGP.from_dict(item, Z, scores[:, j])
                 for j, item in enumerate(outputs["curve"]["scores"])

@@ -1,1 +1,37 @@
-"""identify"""
+"""The main job: find a coating that meets an F60 target in a handful of solver runs.
+
+The flow, one module a step:
+
+- :mod:`._doe` (design of experiments) and :mod:`._commands` (``doe``, ``fit``,
+  ``predict``: sample the full solver, fit :class:`surrogate.gp.CoatingSurrogate`);
+- :mod:`._loop` (``run``): an initial design, then surrogate → constrained Optuna
+  search on it (:mod:`._objective`: misfit and constraints) → full-solver
+  verification, until a verified point meets the target;
+- :mod:`._verify`: the verify study ``<name>/verify`` — the one place that names a
+  run (:func:`verification_inputs`, solver settings included), opens the study,
+  queues, tells and reads back trials; used by the in-process verifier and by
+- :mod:`._worker` (``worker``, ``run --jobs N``): processes on any machine that
+  claim queued trials through the storage, with heartbeats and retries;
+- :mod:`._identifiability`: what a scalar target determines;
+- :mod:`._export`: the verified optimum as an LS-DYNA card.
+"""
+
+from ._commands import DoeResult, FitResult, PredictResult, doe, fit, predict
+from ._export import ExportResult, export
+from ._loop import RunResult, run
+from ._worker import WorkerResult, work
+
+__all__ = [
+    "DoeResult",
+    "ExportResult",
+    "FitResult",
+    "PredictResult",
+    "RunResult",
+    "WorkerResult",
+    "doe",
+    "export",
+    "fit",
+    "predict",
+    "run",
+    "work",
+]

@@ -9,12 +9,15 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .._errors import InputDataError
 from .._io import atomic_write_text
 from ..study._spec import StudySpec, load_study
 from ..study._units import gpa_to_mpa
+
+if TYPE_CHECKING:
+    from ._verify import Verification
 
 __all__ = ["EXPORT_FORMATS", "ExportResult", "export"]
 
@@ -88,7 +91,7 @@ def export(
         raise InputDataError(f"output folder {Path(output).parent} does not exist; create it first")
     url = storage or spec.default_storage()
     chosen, name = _verified_optimum(spec, url)
-    values = _deck_values(chosen["params"], units)
+    values = _deck_values(chosen.params, units)
     text = _lsdyna_text(spec, chosen, values, units, name)
     if output is not None:
         atomic_write_text(output, text)
@@ -96,12 +99,12 @@ def export(
         format=format,
         study=name,
         storage=url,
-        trial_number=int(chosen["number"]),
-        ecoat_gpa=chosen["params"]["ecoat_gpa"],
-        scoat_gpa=chosen["params"]["scoat_gpa"],
-        tcoat_mm=chosen["params"]["tcoat_mm"],
-        f60_n=float(chosen["f60_n"]),
-        theta_sat_deg=float(chosen["theta_sat_deg"]),
+        trial_number=int(chosen.number or 0),  # a verified point is a trial
+        ecoat_gpa=chosen.params["ecoat_gpa"],
+        scoat_gpa=chosen.params["scoat_gpa"],
+        tcoat_mm=chosen.params["tcoat_mm"],
+        f60_n=float(chosen.f60_n),
+        theta_sat_deg=float(chosen.theta_sat_deg),
         units=units,
         parameters=values,
         text=text,
@@ -109,7 +112,7 @@ def export(
     )
 
 
-def _verified_optimum(spec: StudySpec, url: str) -> tuple[dict[str, Any], str]:
+def _verified_optimum(spec: StudySpec, url: str) -> tuple[Verification, str]:
     import optuna
 
     from ..storage._optuna import quiet_optuna
@@ -146,7 +149,7 @@ def _deck_values(params: dict[str, float], units: str) -> dict[str, float]:
 
 
 def _lsdyna_text(
-    spec: StudySpec, chosen: dict[str, Any], values: dict[str, float], units: str, name: str
+    spec: StudySpec, chosen: Verification, values: dict[str, float], units: str, name: str
 ) -> str:
     from ..solvers._lsdyna import FIELD, fill_parameters
 
@@ -155,10 +158,10 @@ def _lsdyna_text(
     target = spec.targets.f60_n
     header = [
         "$ Coating of *MAT_SEATBELT_2D identified by surrogate",
-        f"$ study {name}, verify trial #{chosen['number']}, solver {spec.solver}",
-        f"$ verified: F60 = {chosen['f60_n']:.4g} N"
+        f"$ study {name}, verify trial #{chosen.number}, solver {spec.solver}",
+        f"$ verified: F60 = {chosen.f60_n:.4g} N"
         + (f" (target {target:.4g} N +/- {100 * spec.targets.tolerance:g} %)" if target else "")
-        + f", theta_sat = {chosen['theta_sat_deg']:g} deg",
+        + f", theta_sat = {chosen.theta_sat_deg:g} deg",
         f"$ units {units}: ECOAT, SCOAT in {stress}, TCOAT in {length}",
         "*KEYWORD",
     ]

@@ -30,7 +30,7 @@ from ._commands import fit_surrogate
 from ._doe import make_design
 from ._identifiability import assess_identifiability
 from ._objective import constraint_values, is_feasible, relative_misfit
-from ._verify import Verifier, open_verify_study, target_of, verify_study_name
+from ._verify import Verification, Verifier, open_verify_study, target_of, verify_study_name
 from ._worker import HEARTBEAT_S, WorkerDispatcher
 
 __all__ = ["RunResult", "run"]
@@ -299,11 +299,11 @@ def _result(
     names = verifier.names
     if point is not None:
         verified = {
-            **point["params"],
-            "f60_n": point["f60_n"],
-            "theta_sat_deg": point["theta_sat_deg"],
+            **point.params,
+            "f60_n": point.f60_n,
+            "theta_sat_deg": point.theta_sat_deg,
         }
-    n_ok = sum(r["status"] == "ok" for r in verifier.records.values())
+    n_ok = sum(r.status == "ok" for r in verifier.records.values())
     if point is not None and n_ok >= 3:
         # refit on every verified run, the last candidates included
         model = fit_surrogate(verifier.sample_set(), seed=spec.seed)
@@ -333,7 +333,7 @@ def _result(
         target_n=target_of(spec),
         tolerance=spec.targets.tolerance,
         records=list(verifier.records.values()),
-        chosen_number=None if chosen is None else chosen["number"],
+        chosen_number=None if chosen is None else chosen.number,
         note=_note(spec, result),
     )
     return result
@@ -342,14 +342,14 @@ def _result(
 def _assess(
     spec: StudySpec,
     names: list[str],
-    point: dict[str, Any],
+    point: Verification,
     model: Any,
     good: np.ndarray,
     gradient: np.ndarray | None,
 ) -> dict[str, Any]:
     assessment = assess_identifiability(
         names,
-        np.array([point["params"][n] for n in names]),
+        np.array([point.params[n] for n in names]),
         lambda X: np.log(model.predict(X)["f60_n"]),
         good,
         tolerance=spec.targets.tolerance,
@@ -380,7 +380,7 @@ def _equally_good(model: Any, spec: StudySpec, verifier: Verifier, iterations: i
     names = verifier.names
     trials = _search(model, spec, iterations + 1)
     predicted = trials[trials.feasible & (trials.misfit <= spec.targets.tolerance)]
-    verified = [[r["params"][n] for n in names] for r in verifier.meeting()]
+    verified = [[r.params[n] for n in names] for r in verifier.meeting()]
     points = [predicted[names].to_numpy()]
     if verified:
         points.append(np.array(verified))
@@ -391,13 +391,13 @@ def _message(
     spec: StudySpec,
     status: str,
     verifier: Verifier,
-    point: dict[str, Any] | None,
+    point: Verification | None,
     calls_to_verify: int | None,
 ) -> str:
     target, tolerance = target_of(spec), spec.targets.tolerance
     if status == "verified" and point is not None:
         return (
-            f"verified: F60 = {point['f60_n']:.4g} N is within {100 * tolerance:g} % of "
+            f"verified: F60 = {point.f60_n:.4g} N is within {100 * tolerance:g} % of "
             f"the target {target:.4g} N and every constraint holds, after "
             f"{calls_to_verify} full-solver runs"
         )
@@ -417,11 +417,11 @@ def _message(
     return (
         f"budget exhausted: no verified point meets the target {target:.4g} N "
         f"(± {100 * tolerance:g} %) with every constraint after {verifier.calls} runs; "
-        f"the best has F60 = {point['f60_n']:.4g} N "
-        f"(misfit {100 * point['misfit']:.2f} %).{why}"
+        f"the best has F60 = {point.f60_n:.4g} N "
+        f"(misfit {100 * point.misfit:.2f} %).{why}"
     )
 
 
 def _reach(verifier: Verifier) -> tuple[float, float] | None:
-    values = [r["f60_n"] for r in verifier.records.values() if r["status"] == "ok"]
+    values = [r.f60_n for r in verifier.records.values() if r.status == "ok"]
     return (min(values), max(values)) if values else None

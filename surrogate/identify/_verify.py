@@ -20,8 +20,9 @@ values (``≤ 0`` feasible), F60, θsat and the curve.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -40,6 +41,7 @@ from ._objective import constraint_values, is_feasible, meets_target, relative_m
 
 __all__ = [
     "METRIC",
+    "Verification",
     "Verifier",
     "as_planned",
     "enqueue",
@@ -55,8 +57,36 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 METRIC = "f60_relative_misfit"
-Record = dict[str, Any]
-Dispatch = Callable[[optuna.Study, list[dict[str, float]], str], dict[str, Record]]
+
+
+@dataclass(frozen=True)
+class Verification:
+    """One full-solver run of the verify study, as its trial holds it.
+
+    ``status`` is ``ok`` or ``failed`` (then ``reason`` says why and the other
+    fields keep their defaults); ``misfit`` is ``|F60 / target − 1|``,
+    ``constraints`` the named constraint values (``≤ 0`` feasible), ``number``
+    the trial's number, ``angle_deg``/``force_n`` the curve.
+    """
+
+    params: dict[str, float]
+    status: str
+    reason: str = ""
+    f60_n: float = math.nan
+    theta_sat_deg: float = math.nan
+    saturated: bool = False
+    misfit: float = math.inf
+    constraints: dict[str, float] = field(default_factory=dict)
+    number: int | None = None
+    angle_deg: list[float] = field(default_factory=list)
+    force_n: list[float] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+
+Dispatch = Callable[[optuna.Study, list[dict[str, float]], str], dict[str, Verification]]
 
 
 def verify_study_name(spec: StudySpec) -> str:
@@ -170,7 +200,7 @@ def tell_verification(
     spec: StudySpec,
     params: dict[str, float],
     result: dict[str, Any],
-) -> Record:
+) -> Verification:
     """Finish ``trial`` with one full-solver ``result``; return the verifier's record.
 
     A failed run is a FAIL trial with its ``reason``; a successful one carries
@@ -180,7 +210,7 @@ def tell_verification(
     if result["status"] != "ok":
         trial.set_user_attr("reason", result["reason"])
         study.tell(trial, state=TrialState.FAIL)
-        return {"params": params, "status": "failed", "reason": result["reason"]}
+        return Verification(params, "failed", reason=result["reason"])
     misfit = relative_misfit(result["f60_n"], target_of(spec))
     constraints = constraint_values(params, result["theta_sat_deg"], spec)
     for name, value in constraints.items():
@@ -198,44 +228,40 @@ def tell_verification(
     }.items():
         trial.set_user_attr(name, value)
     study.tell(trial, misfit)
-    return {
-        "params": params,
-        "status": "ok",
-        "f60_n": result["f60_n"],
-        "theta_sat_deg": result["theta_sat_deg"],
-        "saturated": result["saturated"],
-        "misfit": misfit,
-        "constraints": constraints,
-        "number": trial.number,
-        "angle_deg": result["angle_deg"],
-        "force_n": result["force_n"],
-    }
+    return Verification(
+        params,
+        "ok",
+        f60_n=result["f60_n"],
+        theta_sat_deg=result["theta_sat_deg"],
+        saturated=result["saturated"],
+        misfit=misfit,
+        constraints=constraints,
+        number=trial.number,
+        angle_deg=result["angle_deg"],
+        force_n=result["force_n"],
+    )
 
 
-def record_of(trial: FrozenTrial) -> Record:
+def record_of(trial: FrozenTrial) -> Verification:
     """The record :func:`tell_verification` returned, read back from a finished trial."""
     if trial.state != TrialState.COMPLETE:
-        return {
-            "params": dict(trial.params),
-            "status": "failed",
-            "reason": trial.user_attrs.get("reason", ""),
-        }
+        return Verification(dict(trial.params), "failed", reason=trial.user_attrs.get("reason", ""))
     attrs = trial.user_attrs
-    return {
-        "params": dict(trial.params),
-        "status": "ok",
-        "f60_n": attrs["f60_n"],
-        "theta_sat_deg": attrs["theta_sat_deg"],
-        "saturated": attrs["saturated"],
-        "misfit": float(trial.value if trial.value is not None else np.inf),
-        "constraints": dict(attrs["constraints"]),
-        "number": trial.number,
-        "angle_deg": attrs["curve_angle_deg"],
-        "force_n": attrs["curve_force_n"],
-    }
+    return Verification(
+        dict(trial.params),
+        "ok",
+        f60_n=attrs["f60_n"],
+        theta_sat_deg=attrs["theta_sat_deg"],
+        saturated=attrs["saturated"],
+        misfit=float(trial.value if trial.value is not None else np.inf),
+        constraints=dict(attrs["constraints"]),
+        number=trial.number,
+        angle_deg=attrs["curve_angle_deg"],
+        force_n=attrs["curve_force_n"],
+    )
 
 
-def finished_records(study: optuna.Study, keys: Iterable[str]) -> dict[str, Record]:
+def finished_records(study: optuna.Study, keys: Iterable[str]) -> dict[str, Verification]:
     """The record of every key whose run is over (done, failed or abandoned)."""
     wanted = set(keys)
     by_key: dict[str, list[FrozenTrial]] = {}
@@ -250,11 +276,9 @@ def finished_records(study: optuna.Study, keys: Iterable[str]) -> dict[str, Reco
             records[key] = record_of(done[-1])
         elif all(t.state == TrialState.FAIL and not retry_pending(t) for t in trials):
             trial = trials[-1]
-            records[key] = {
-                "params": dict(trial.params),
-                "status": "failed",
-                "reason": f"its worker died {MAX_RETRY + 1} times",
-            }
+            records[key] = Verification(
+                dict(trial.params), "failed", reason=f"its worker died {MAX_RETRY + 1} times"
+            )
     return records
 
 
@@ -281,7 +305,7 @@ class Verifier:
         self.dispatch = dispatch
         self.cache = ResultCache(spec.directory / ".solver-cache")
         self.names = list(spec.space.names)
-        self.records: dict[str, Record] = {}
+        self.records: dict[str, Verification] = {}
         for trial in study.get_trials(
             deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL)
         ):
@@ -295,7 +319,7 @@ class Verifier:
         return len(self.records)
 
     def points(self) -> np.ndarray:
-        return np.array([[r["params"][n] for n in self.names] for r in self.records.values()])
+        return np.array([[r.params[n] for n in self.names] for r in self.records.values()])
 
     def verify(self, points: np.ndarray, *, phase: str) -> None:
         """Verify ``points`` in order while the budget lasts."""
@@ -305,11 +329,11 @@ class Verifier:
             self.records.update(self.dispatch(self.study, batch[: max(room, 0)], phase))
         for params in batch:
             if self.calls >= self.spec.budget.max_solver_calls:
-                return
+                break
             self.solve(params, phase=phase)
         self._report(phase)
 
-    def solve(self, params: dict[str, float], *, phase: str) -> Record:
+    def solve(self, params: dict[str, float], *, phase: str) -> Verification:
         """One full-solver run as a trial; a finished run is never repeated."""
         inputs = verification_inputs(self.spec, params)
         key = input_hash(inputs)
@@ -323,7 +347,7 @@ class Verifier:
             self.records[key] = self._tell(params, key, result, phase)
         return self.records[key]
 
-    def sensitivities(self, point: dict[str, Any]) -> np.ndarray | None:
+    def sensitivities(self, point: Verification) -> np.ndarray | None:
         """``∂ log F60 / ∂ log p`` at a verified point, by forward differences of
         the full solver (one run per parameter, +5 % each); None if the budget
         allows none (``[budget] identifiability_runs``)."""
@@ -333,48 +357,48 @@ class Verifier:
         gradient = np.empty(len(self.names))
         for k, name in enumerate(self.names):
             spec = self.spec.space[name]
-            direction = 1.0 if point["params"][name] * 1.05 <= spec.high else -1.0
-            shifted = {**point["params"], name: point["params"][name] * np.exp(direction * step)}
+            direction = 1.0 if point.params[name] * 1.05 <= spec.high else -1.0
+            shifted = {**point.params, name: point.params[name] * np.exp(direction * step)}
             record = self.solve(shifted, phase="identifiability")
-            if record["status"] != "ok":
+            if record.status != "ok":
                 return None
-            gradient[k] = direction * np.log(record["f60_n"] / point["f60_n"]) / step
+            gradient[k] = direction * np.log(record.f60_n / point.f60_n) / step
         return gradient
 
     def _tell(
         self, params: dict[str, float], key: str, result: dict[str, Any], phase: str
-    ) -> Record:
+    ) -> Verification:
         self.study.enqueue_trial(params, skip_if_exists=False)
         trial = self.study.ask(distributions(self.spec.space))
         trial.set_user_attr("input_hash", key)
         trial.set_user_attr("phase", phase)
         return tell_verification(self.study, trial, self.spec, params, result)
 
-    def meeting(self) -> list[Record]:
+    def meeting(self) -> list[Verification]:
         tolerance = self.spec.targets.tolerance
         return [
             r
             for r in self.records.values()
-            if r["status"] == "ok" and meets_target(r["misfit"], r["constraints"], tolerance)
+            if r.status == "ok" and meets_target(r.misfit, r.constraints, tolerance)
         ]
 
-    def chosen(self) -> Record | None:
+    def chosen(self) -> Verification | None:
         """The preferred verified point that meets the target, if any."""
         meeting = self.meeting()
         if not meeting:
             return None
         order = self.spec.preference_order
-        return min(meeting, key=lambda r: tuple(r["params"][name] for name in order))
+        return min(meeting, key=lambda r: tuple(r.params[name] for name in order))
 
-    def best(self) -> Record | None:
-        ok = [r for r in self.records.values() if r["status"] == "ok"]
+    def best(self) -> Verification | None:
+        ok = [r for r in self.records.values() if r.status == "ok"]
         if not ok:
             return None
-        return min(ok, key=lambda r: (not is_feasible(r["constraints"]), r["misfit"]))
+        return min(ok, key=lambda r: (not is_feasible(r.constraints), r.misfit))
 
     def sample_set(self) -> SampleSet:
         """The verified runs as the surrogate's training set."""
-        rows = [r for r in self.records.values() if r["status"] == "ok"]
+        rows = [r for r in self.records.values() if r.status == "ok"]
         if len(rows) < 3:
             raise InputDataError(
                 f"only {len(rows)} solver runs succeeded; the surrogate needs "
@@ -383,17 +407,15 @@ class Verifier:
         runs = pd.DataFrame(
             {
                 "run_id": np.arange(1, len(rows) + 1),
-                **{n: [r["params"][n] for r in rows] for n in self.names},
-                "f60_n": [r["f60_n"] for r in rows],
-                "theta_sat_deg": [r["theta_sat_deg"] for r in rows],
+                **{n: [r.params[n] for r in rows] for n in self.names},
+                "f60_n": [r.f60_n for r in rows],
+                "theta_sat_deg": [r.theta_sat_deg for r in rows],
                 "status": "ok",
             }
         )
         curves = pd.concat(
             [
-                pd.DataFrame(
-                    {"run_id": i + 1, "angle_deg": r["angle_deg"], "force_n": r["force_n"]}
-                )
+                pd.DataFrame({"run_id": i + 1, "angle_deg": r.angle_deg, "force_n": r.force_n})
                 for i, r in enumerate(rows)
             ],
             ignore_index=True,
@@ -408,8 +430,8 @@ class Verifier:
             "no successful run yet"
             if best is None
             else (
-                f"best verified misfit {100 * best['misfit']:.2f} %"
-                + ("" if is_feasible(best["constraints"]) else " (infeasible)")
+                f"best verified misfit {100 * best.misfit:.2f} %"
+                + ("" if is_feasible(best.constraints) else " (infeasible)")
             )
         )
         met = " — target met" if self.chosen() is not None else ""

@@ -35,7 +35,7 @@ from .._log import show_progress
 from .._pool import process_context
 from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
-from ..storage._optuna import distributions, quiet_optuna
+from ..storage._optuna import quiet_optuna, suggest
 from ..storage._storage import (
     MAX_RETRY,
     check_workers,
@@ -45,6 +45,7 @@ from ..storage._storage import (
 )
 from ..study._spec import StudySpec, load_study
 from ._verify import (
+    Verification,
     as_planned,
     enqueue,
     finished_records,
@@ -111,7 +112,7 @@ class WorkerDispatcher:
 
     def __call__(
         self, study: optuna.Study, points: list[dict[str, float]], phase: str
-    ) -> dict[str, dict[str, Any]]:
+    ) -> dict[str, Verification]:
         keys = enqueue(study, self.spec, points, phase=phase)
         if self.jobs > 0:
             todo = len(set(keys) - set(finished_records(study, keys)))
@@ -356,13 +357,13 @@ class _Worker:
         beat = _HeartbeatThread(self.storage, trial_id, self.heartbeat_s)
         beat.start()
         try:
-            params = {
-                name: trial.suggest_float(name, d.low, d.high, log=d.log)
-                for name, d in distributions(self.spec.space).items()
-            }
+            params = suggest(trial, self.spec.space)
             inputs = verification_inputs(self.spec, params)
             key = input_hash(inputs)
-            result = self._result(key, inputs)
+            queued = trial.user_attrs.get("input_hash", key)
+            # another solver version or settings than the planner's: refuse rather than
+            # solve something else (the trial keeps the planner's hash, so it waits no more)
+            result = self._result(key, inputs) if queued == key else _OTHER_INPUTS
         except _Interrupted:
             beat.stop()
             self._requeue(trial)
@@ -371,9 +372,7 @@ class _Worker:
             beat.stop()
             raise
         beat.stop()
-        if trial.user_attrs.get("input_hash") not in (None, key):
-            result = {"status": "failed", "reason": "queued with other solver inputs (hash)"}
-        trial.set_user_attr("input_hash", key)
+        trial.set_user_attr("input_hash", queued)
         try:
             record = tell_verification(self.study, trial, self.spec, params, result)
         except optuna.exceptions.UpdateFinishedTrialError:
@@ -417,19 +416,24 @@ class _Worker:
                 self._stop,
             )
 
-    def _count(self, number: int, record: dict[str, Any]) -> None:
+    def _count(self, number: int, record: Verification) -> None:
         self.counts["runs"] += 1
-        self.counts["ok" if record["status"] == "ok" else "failed"] += 1
+        self.counts["ok" if record.status == "ok" else "failed"] += 1
         if self.progress:
             text = (
-                f"F60 {record['f60_n']:.4g} N, misfit {100 * record['misfit']:.2f} %"
-                if record["status"] == "ok"
-                else f"failed: {record['reason']}"
+                f"F60 {record.f60_n:.4g} N, misfit {100 * record.misfit:.2f} %"
+                if record.status == "ok"
+                else f"failed: {record.reason}"
             )
             logger.info("[%s] trial %d: %s", self.spec.name, number, text)
 
 
 _SIGNALS = (signal.SIGTERM, signal.SIGINT)
+_OTHER_INPUTS = {
+    "status": "failed",
+    "reason": "this worker's solver inputs differ from the planner's (another solver "
+    "version or [solver] settings); start workers with the planner's study file and solver",
+}
 
 
 class _HeartbeatThread:

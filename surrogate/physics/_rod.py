@@ -234,6 +234,8 @@ class _Problem:
         clamp_stiffness_nmm: float | None = None,
     ) -> None:
         self.section = section
+        self.segment_lengths_mm = h  # the mesh as given
+        self.bending_length = bending_length_mm
         if clamp_stiffness_nmm is not None:
             h = np.concatenate([[0.0], h])  # the zero-length clamp segment
         self.h = h
@@ -279,19 +281,7 @@ class _Problem:
     ) -> _Evaluation:
         """Residual of equilibrium and of the gap at ``(psi, lam)``."""
         N, h = self.N, self.h
-        kappa = np.empty(N)
-        kappa[0] = psi[0] - theta
-        kappa[1:] = psi[1:] - psi[:-1]
-        kappa /= self.ell
-        if self.spring is not None:
-            rotation = kappa[0]
-            kappa[0] = 0.0  # the spring node keeps an unused, unloaded section
-        m_unit, c_unit, state = self.section.respond(kappa, previous.state)
-        moment = m_unit * self.width
-        stiff = c_unit * self.width / self.ell
-        if self.spring is not None:
-            moment[0] = self.spring * rotation
-            stiff[0] = self.spring
+        kappa, moment, stiff, state = self._bending(psi, theta, previous.state)
         residual = np.empty(N + 1)
         residual[:N] = moment
         residual[: N - 1] -= moment[1:]
@@ -312,18 +302,7 @@ class _Problem:
             residual[N] = contact.distance - self.rho
         if active and self.mu:
             assert contact is not None
-            if contact.on_vertex:
-                before = previous.nodes[contact.upstream]
-            else:
-                k = contact.segment
-                before = previous.nodes[k] + contact.u * previous.e[k]
-            slip_vec = contact.point - before
-            # Coulomb's law by return mapping: stick elastically, else slide.
-            slip = float(contact.tangent @ slip_vec)
-            trial = previous.friction_n - self.stick_stiffness * slip
-            limit = self.mu * max(lam, 0.0)
-            sticking = abs(trial) <= limit
-            friction = trial if sticking else float(np.copysign(limit, trial))
+            friction, sticking, slip_vec = self._friction(contact, lam, previous)
             residual[:N] -= friction * (contact.tangent @ contact.jac)
         return _Evaluation(
             psi,
@@ -341,6 +320,46 @@ class _Problem:
             active=active,
             gap=0.0 if contact is None else contact.distance - self.rho,
         )
+
+    def _bending(
+        self, psi: np.ndarray, theta: float, previous: SectionState
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, SectionState]:
+        """Curvatures ``kappa`` at the nodes, the moments and tangent stiffnesses of
+        the section law (full width), and the new section state; node 0 carries
+        the clamp spring instead when there is one."""
+        kappa = np.empty(self.N)
+        kappa[0] = psi[0] - theta
+        kappa[1:] = psi[1:] - psi[:-1]
+        kappa /= self.ell
+        if self.spring is not None:
+            rotation = kappa[0]
+            kappa[0] = 0.0  # the spring node keeps an unused, unloaded section
+        m_unit, c_unit, state = self.section.respond(kappa, previous)
+        moment = m_unit * self.width
+        stiff = c_unit * self.width / self.ell
+        if self.spring is not None:
+            moment[0] = self.spring * rotation
+            stiff[0] = self.spring
+        return kappa, moment, stiff, state
+
+    def _friction(
+        self, contact: _Contact, lam: float, previous: _Configuration
+    ) -> tuple[float, bool, np.ndarray]:
+        """The friction force, whether it sticks, and the slip of the material point
+        in contact since ``previous``."""
+        if contact.on_vertex:
+            before = previous.nodes[contact.upstream]
+        else:
+            k = contact.segment
+            before = previous.nodes[k] + contact.u * previous.e[k]
+        slip_vec = contact.point - before
+        # Coulomb's law by return mapping: stick elastically, else slide.
+        slip = float(contact.tangent @ slip_vec)
+        trial = previous.friction_n - self.stick_stiffness * slip
+        limit = self.mu * max(lam, 0.0)
+        sticking = abs(trial) <= limit
+        friction = trial if sticking else float(np.copysign(limit, trial))
+        return friction, sticking, slip_vec
 
     def jacobian(self, ev: _Evaluation, stiff: np.ndarray | None = None) -> np.ndarray:
         """Exact derivative of ``ev.residual`` with respect to ``(psi, lam)``.
@@ -577,10 +596,9 @@ def solve_rod(
         When a step does not converge even after bisection, the strip slides
         off the probe, or it loses contact; the message names the angle.
     """
-    h = np.asarray(segment_lengths_mm, dtype=float)
     problem = _Problem(
         section,
-        h,
+        np.asarray(segment_lengths_mm, dtype=float),
         width_mm=width_mm,
         bending_length_mm=bending_length_mm,
         contact_radius_mm=contact_radius_mm,
@@ -589,21 +607,26 @@ def solve_rod(
         line_load_n_mm=line_load_n_mm,
         clamp_stiffness_nmm=clamp_stiffness_nmm,
     )
-    at_rest = (0.0, 0.0, 0.0, bending_length_mm, 0.0, 0.0)
+    return _history(problem, np.asarray(angles_deg, dtype=float))
+
+
+def _history(problem: _Problem, angles_deg: np.ndarray) -> RodSolution:
+    """March ``problem`` through ``angles_deg`` and record each converged state."""
+    at_rest = (0.0, 0.0, 0.0, problem.bending_length, 0.0, 0.0)
     history = [
         at_rest if ev is None else _record(problem, ev)
-        for ev, _ in _march(problem, np.radians(np.asarray(angles_deg, dtype=float)))
+        for ev, _ in _march(problem, np.radians(angles_deg))
     ]
     columns = np.array(history).T
     return RodSolution(
-        angle_deg=np.asarray(angles_deg, dtype=float),
+        angle_deg=angles_deg,
         force_n=columns[0],
         force_perp_n=columns[1],
         normal_force_n=columns[2],
         contact_arc_mm=columns[3],
         clamp_moment_nmm=columns[4],
         max_plastic_curvature_per_mm=columns[5],
-        segment_lengths_mm=h,
+        segment_lengths_mm=problem.segment_lengths_mm,
     )
 
 

@@ -1,11 +1,13 @@
 """The full-solver interface, its registry, and what every adapter shares.
 
-A solver turns the plain-JSON inputs of :func:`surrogate.solvers._batch.solver_inputs`
+A solver turns the plain-JSON inputs of :func:`surrogate.solvers.solver_inputs`
 into a plain-JSON result: ``status`` (``ok``/``failed``), ``reason``, the
 features ``f60_n``, ``theta_sat_deg``, ``saturated`` (always from
 :func:`surrogate.physics.curve_features`) and the curve on whole degrees
-(``angle_deg``, ``force_n``, ``force_perp_n``). A failure is a result, never an
-exception, so one bad point does not stop a batch.
+(``angle_deg``, ``force_n``, ``force_perp_n``). :meth:`Solver.solve` makes a
+failure a result, never an exception, so one bad point does not stop a batch;
+:meth:`Solver.run` (what :func:`surrogate.simulate` calls) raises it instead.
+What the solver models comes from :func:`surrogate.solvers.model_state`.
 
 External solvers run in a working directory of their own (a temporary one,
 removed afterwards unless the settings say ``keep_workdir``), are started
@@ -27,10 +29,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from .._errors import InputDataError, SolverError
-from ..effects import ModelState
 from ..physics import curve_features
-from ..study._rig import Rig
-from ._simulate import model_state_of
 
 __all__ = [
     "Solver",
@@ -40,7 +39,7 @@ __all__ = [
     "curve_result",
     "failed_result",
     "get_solver",
-    "model_state",
+    "guarded",
     "register_solver",
     "run_command",
     "work_directory",
@@ -60,8 +59,18 @@ class Solver:
     settings_keys: ClassVar[tuple[str, ...]] = ()
 
     def solve(self, inputs: Mapping[str, Any]) -> dict[str, Any]:  # pragma: no cover
-        """One run; ``inputs`` as made by :func:`surrogate.solvers._batch.solver_inputs`."""
+        """One run; ``inputs`` as made by :func:`surrogate.solvers.solver_inputs`.
+
+        A failed run is a result (``status`` ``failed`` with its ``reason``).
+        """
         raise NotImplementedError
+
+    def run(self, inputs: Mapping[str, Any]) -> dict[str, Any]:
+        """One run whose failure raises: a SolverError naming the solver and the reason."""
+        result = self.solve(inputs)
+        if result["status"] != "ok":
+            raise SolverError(f"{self.name}: {result['reason']}")
+        return result
 
     @classmethod
     def check_settings(cls, settings: Mapping[str, Any]) -> dict[str, Any]:
@@ -86,6 +95,11 @@ def register_solver(cls: type[Solver]) -> type[Solver]:
 
 
 def available_solvers() -> tuple[str, ...]:
+    """The registered kinds, in order of registration: the one list of solver kinds.
+
+    ``builtin``, ``calculix`` and ``lsdyna`` register when :mod:`surrogate.solvers`
+    is imported, which importing any of its modules does first.
+    """
     return tuple(_REGISTRY)
 
 
@@ -100,20 +114,6 @@ def get_solver(kind: str) -> Solver:
 
 
 # -- shared pieces ----------------------------------------------------------------------------
-def model_state(inputs: Mapping[str, Any]) -> ModelState:
-    """The model state of one run: coating in MPa/mm, the rig of its conditions,
-    every effect applied (the same path as :func:`surrogate.simulate`)."""
-    params = inputs["params"]
-    return model_state_of(
-        params["ecoat_gpa"],
-        params["scoat_gpa"],
-        params["tcoat_mm"],
-        Rig(**inputs["rig"]),
-        inputs.get("effects") or None,
-        inputs.get("conditions") or None,
-    )
-
-
 def failed_result(reason: str) -> dict[str, Any]:
     return {"status": "failed", "reason": reason}
 

@@ -1,27 +1,33 @@
-"""Batch evaluation of a design with the full solver: workers, cache, progress."""
+"""Batch evaluation of a design with the full solver: the run inputs, workers, cache, progress.
+
+:func:`solver_inputs` is the one definition of a run's inputs (what its cache
+key hashes); :func:`evaluate_design` runs a design through the package's one
+process pool (:func:`surrogate._pool.imap_unordered`). pandas and tqdm load on
+first use of :func:`evaluate_design`, so :func:`surrogate.simulate` stays light.
+"""
 
 from __future__ import annotations
 
 import sys
 from collections.abc import Callable, Mapping
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
-from tqdm import tqdm
 
 from .._errors import InputDataError
+from .._pool import check_jobs, imap_unordered
 from ..physics import SOLVER_VERSION
-from ..study._rig import Rig
-from ..study._samples import SampleSet
-from ..study._space import COATING_PARAMETERS, ParameterSpace
+from ..study import COATING_PARAMETERS, ParameterSpace, Rig
+from ._base import available_solvers, get_solver
 from ._cache import ResultCache, input_hash
 
-__all__ = ["evaluate_design", "solve_inputs", "solver_inputs"]
+if TYPE_CHECKING:
+    import pandas as pd
 
-SOLVERS = ("builtin", "calculix", "lsdyna")
+    from ..study import SampleSet
+
+__all__ = ["evaluate_design", "solve_inputs", "solver_inputs"]
 
 
 def solver_inputs(
@@ -43,8 +49,9 @@ def solver_inputs(
     ``inputs["solver_settings"]`` — only when there are any, so builtin hashes
     stay what they were.
     """
-    if solver not in SOLVERS:
-        raise InputDataError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    kinds = available_solvers()
+    if solver not in kinds:
+        raise InputDataError(f"solver must be one of {', '.join(kinds)}, got {solver!r}")
     missing = [name for name in COATING_PARAMETERS if name not in point]
     if missing:
         raise InputDataError(
@@ -70,16 +77,12 @@ def solver_inputs(
 
 
 def _solver_version(solver: str) -> str:
-    from . import get_solver
-
     return get_solver(solver).version or SOLVER_VERSION
 
 
 def solve_inputs(inputs: dict[str, Any]) -> dict[str, Any]:
     """Run the solver named by ``inputs["solver"]`` (:func:`surrogate.solvers.get_solver`)
     on :func:`solver_inputs`; a failure is a result, not an exception."""
-    from . import get_solver
-
     return get_solver(inputs.get("solver", "builtin")).solve(inputs)
 
 
@@ -111,21 +114,49 @@ def evaluate_design(
         Show a progress bar on stderr.
     """
     rig = Rig() if rig is None else rig
-    if not isinstance(jobs, int) or jobs < 1:
-        raise InputDataError(f"jobs must be a whole number ≥ 1, got {jobs!r}")
+    check_jobs(jobs)
     cache = ResultCache(cache_dir) if cache_dir is not None else None
-    points = design[list(space.names)].to_dict("records")
     inputs = [
         solver_inputs(point, rig, solver=solver, solver_settings=solver_settings)
-        for point in points
+        for point in design[list(space.names)].to_dict("records")
     ]
     keys = [input_hash(item) for item in inputs]
-    results: dict[int, dict[str, Any]] = {}
-    for index, key in enumerate(keys):
-        hit = cache.get(key) if cache is not None else None
-        if hit is not None:
-            results[index] = hit
-    todo = [i for i in range(len(inputs)) if i not in results]
+    results = _cached_results(cache, keys)
+    calls = len(inputs) - len(results)
+    _solve_missing(inputs, keys, results, cache=cache, solve=solve, jobs=jobs, progress=progress)
+    provenance = {
+        "solver": solver,
+        "solver_version": _solver_version(solver),
+        "rig": rig.to_dict(),
+        "solver_calls": calls,
+        **(meta or {}),
+    }
+    return _sample_set(design, space, keys, [results[i] for i in range(len(inputs))], provenance)
+
+
+def _cached_results(cache: ResultCache | None, keys: list[str]) -> dict[int, dict[str, Any]]:
+    """The results already in ``cache``, by position in ``keys``."""
+    if cache is None:
+        return {}
+    hits = {index: cache.get(key) for index, key in enumerate(keys)}
+    return {index: hit for index, hit in hits.items() if hit is not None}
+
+
+def _solve_missing(
+    inputs: list[dict[str, Any]],
+    keys: list[str],
+    results: dict[int, dict[str, Any]],
+    *,
+    cache: ResultCache | None,
+    solve: Callable[[dict[str, Any]], dict[str, Any]],
+    jobs: int,
+    progress: bool,
+) -> None:
+    """Solve the runs not yet in ``results`` in ``jobs`` processes, adding each to
+    ``results`` and to the cache as it finishes, with a progress bar on stderr."""
+    from tqdm import tqdm
+
+    todo = [index for index in range(len(inputs)) if index not in results]
     bar = tqdm(
         total=len(inputs),
         initial=len(results),
@@ -136,7 +167,8 @@ def evaluate_design(
         dynamic_ncols=True,
     )
     try:
-        for index, result in _run(todo, inputs, solve, jobs):
+        for position, result in imap_unordered(solve, [inputs[i] for i in todo], jobs):
+            index = todo[position]
             results[index] = result
             if cache is not None:
                 cache.put(keys[index], inputs[index], result)
@@ -144,40 +176,6 @@ def evaluate_design(
             bar.set_postfix(failed=sum(r["status"] != "ok" for r in results.values()))
     finally:
         bar.close()
-    provenance = {
-        "solver": solver,
-        "solver_version": _solver_version(solver),
-        "rig": rig.to_dict(),
-        "solver_calls": len(todo),
-        **(meta or {}),
-    }
-    return _sample_set(design, space, keys, [results[i] for i in range(len(inputs))], provenance)
-
-
-def _run(
-    todo: list[int],
-    inputs: list[dict[str, Any]],
-    solve: Callable[[dict[str, Any]], dict[str, Any]],
-    jobs: int,
-):
-    if jobs == 1 or len(todo) <= 1:
-        for index in todo:
-            yield index, solve(inputs[index])
-        return
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
-        pending: dict[Future[dict[str, Any]], int] = {}
-        queue = list(todo)
-        try:
-            while queue or pending:
-                while queue and len(pending) < 2 * jobs:
-                    index = queue.pop(0)
-                    pending[pool.submit(solve, inputs[index])] = index
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for future in done:
-                    yield pending.pop(future), future.result()
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
 
 
 def _sample_set(
@@ -187,6 +185,10 @@ def _sample_set(
     results: list[dict[str, Any]],
     meta: dict[str, Any],
 ) -> SampleSet:
+    import pandas as pd
+
+    from ..study import SampleSet
+
     runs = pd.DataFrame({"run_id": np.arange(1, len(results) + 1)})
     case_ids = (
         design["case_id"].astype(str).to_numpy()

@@ -42,11 +42,11 @@ from ._base import (
     curve_result,
     failed_result,
     guarded,
-    model_state,
     register_solver,
     run_command,
     work_directory,
 )
+from ._state import model_state
 
 __all__ = [
     "LSDYNA_UNITS",

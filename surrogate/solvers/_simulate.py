@@ -1,4 +1,9 @@
-"""``simulate``: one full-solver run of the bending test with the built-in solver."""
+"""``simulate``: one full-solver run of the bending test, as a :class:`BendingCurve`.
+
+Every solver kind takes the same path: the inputs checked and turned into the
+plain-JSON run of :func:`surrogate.solvers.solver_inputs`, then
+``get_solver(kind).run(inputs)``; bad input raises before a solve starts.
+"""
 
 from __future__ import annotations
 
@@ -8,15 +13,12 @@ from typing import Any
 
 import numpy as np
 
-from .._errors import InputDataError, SolverError
-from .._validate import check_positive
-from ..effects import ModelState, get_effect
-from ..physics import CoatingSection, curve_features, default_mesh, solve_rod, uniform_mesh
-from ..study._conditions import check_conditions, rig_for
-from ..study._rig import Rig
-from ..study._units import gpa_to_mpa
+from ..study import Rig
+from ._base import get_solver
+from ._batch import solver_inputs
+from ._state import model_state_of
 
-__all__ = ["BendingCurve", "coating_state", "simulate"]
+__all__ = ["BendingCurve", "simulate"]
 
 
 @dataclass(frozen=True)
@@ -61,40 +63,6 @@ class BendingCurve:
         }
 
 
-def coating_state(ecoat_gpa: float, scoat_gpa: float, tcoat_mm: float, rig: Rig) -> ModelState:
-    """Validate the coating values in the paper's units; the model state in MPa, mm."""
-    ecoat = check_positive("ecoat_gpa", ecoat_gpa, unit="GPa")
-    scoat = check_positive("scoat_gpa", scoat_gpa, unit="GPa")
-    tcoat = check_positive("tcoat_mm", tcoat_mm, unit="mm")
-    half = 0.5 * rig.thickness_mm
-    if tcoat >= half:
-        raise InputDataError(
-            f"tcoat_mm must be < thickness_mm/2 = {half:g} mm (two coat layers fit in the "
-            f"webbing), got {tcoat:g}"
-        )
-    return ModelState(gpa_to_mpa(ecoat), gpa_to_mpa(scoat), tcoat, rig)
-
-
-def model_state_of(
-    ecoat_gpa: float,
-    scoat_gpa: float,
-    tcoat_mm: float,
-    rig: Rig,
-    effects: Mapping[str, Mapping[str, float]] | None,
-    conditions: Mapping[str, Any] | None,
-) -> ModelState:
-    """What a solver sees for one test: the coating validated, the rig of the test's
-    conditions, every effect applied in turn (the one path for every solver)."""
-    enabled = {name: get_effect(name) for name in (effects or {})}
-    reads = [column for effect in enabled.values() for column in effect.reads]
-    checked = check_conditions(conditions, read_by_effects=reads)
-    state = coating_state(ecoat_gpa, scoat_gpa, tcoat_mm, rig_for(rig, checked))
-    for name, values in (effects or {}).items():
-        effect = enabled[name]
-        state = effect.apply(state, effect.resolve(values), checked)
-    return state
-
-
 def simulate(
     ecoat_gpa: float,
     scoat_gpa: float,
@@ -122,9 +90,10 @@ def simulate(
     conditions : mapping, optional
         Conditions of the test: ``tension_n``, ``direction`` (warp/weft),
         ``rate_deg_s``, ``bending_length_mm``, ``width_mm``.
-    solver : {"builtin", "calculix", "lsdyna"}
-        The full solver (:mod:`surrogate.solvers`); an external one reports
-        no contact arc or clamp moment (NaN).
+    solver : str
+        A registered full solver (:func:`surrogate.solvers.available_solvers`:
+        ``builtin``, ``calculix``, ``lsdyna``); an external one reports no
+        contact arc or clamp moment (NaN).
     solver_settings : mapping, optional
         Settings of an external solver, e.g. ``{"mesh": "fine"}``.
 
@@ -135,87 +104,50 @@ def simulate(
     Raises
     ------
     InputDataError
-        A value is out of range (the message names it and the allowed range).
+        A value is out of range (the message names it and the allowed range),
+        raised before a solve starts.
     SolverError
-        The solver did not converge (the message names the angle).
+        The run failed: the built-in solver did not converge (the message
+        names the angle), or an external one failed (the message starts with
+        its name).
     """
     rig = Rig() if rig is None else rig
-    if solver != "builtin" or solver_settings:
-        return _external(
-            solver, (ecoat_gpa, scoat_gpa, tcoat_mm), rig, effects, conditions, solver_settings
-        )
-    state = model_state_of(ecoat_gpa, scoat_gpa, tcoat_mm, rig, effects, conditions)
-    rig = state.rig
-    ratio = state.hardening_ratio
-    section = CoatingSection(
-        state.ecoat_mpa,
-        state.scoat_mpa,
-        state.tcoat_mm,
-        rig.thickness_mm,
-        hardening_modulus_mpa=state.ecoat_mpa * ratio / (1.0 - ratio),
-        extra_stiffness_nmm=state.extra_stiffness_nmm,
+    coating = {"ecoat_gpa": ecoat_gpa, "scoat_gpa": scoat_gpa, "tcoat_mm": tcoat_mm}
+    inputs, checked_rig = _checked_inputs(
+        coating, rig, solver, effects, conditions, solver_settings or {}
     )
-    angles = np.arange(0.0, np.floor(rig.max_angle_deg) + 1.0)
-    if rig.element_size_mm is None:
-        mesh = default_mesh(rig.free_length_mm, rig.bending_length_mm)
-    else:
-        mesh = uniform_mesh(rig.free_length_mm, rig.element_size_mm)
-    solution = solve_rod(
-        section,
-        angles,
-        segment_lengths_mm=mesh,
-        width_mm=rig.width_mm,
-        bending_length_mm=rig.bending_length_mm,
-        contact_radius_mm=rig.contact_radius_mm,
-        friction=rig.friction,
-        tension_n=rig.tension_n,
-        line_load_n_mm=state.line_load_n_mm,
-        clamp_stiffness_nmm=state.clamp_stiffness_nmm,
-    )
-    features = curve_features(solution.angle_deg, solution.force_n)
-    return BendingCurve(
-        angle_deg=solution.angle_deg,
-        force_n=solution.force_n,
-        force_perp_n=solution.force_perp_n,
-        f60_n=features.f60_n,
-        theta_sat_deg=features.theta_sat_deg,
-        saturated=features.saturated,
-        contact_arc_mm=solution.contact_arc_mm,
-        clamp_moment_nmm=solution.clamp_moment_nmm,
-        ecoat_gpa=float(ecoat_gpa),
-        scoat_gpa=float(scoat_gpa),
-        tcoat_mm=float(tcoat_mm),
-        rig=rig,
-    )
+    result = get_solver(solver).run(inputs)
+    return _curve(result, coating, checked_rig)
 
 
-def _external(
-    solver: str,
-    coating: tuple[float, float, float],
+def _checked_inputs(
+    coating: dict[str, float],
     rig: Rig,
+    solver: str,
     effects: Mapping[str, Mapping[str, float]] | None,
     conditions: Mapping[str, Any] | None,
-    settings: Mapping[str, Any] | None,
-) -> BendingCurve:
-    """One run of a solver of :mod:`surrogate.solvers`; bad input raises before it starts."""
-    from . import get_solver
-    from ._base import model_state
-    from ._batch import solver_inputs
-
-    adapter = get_solver(solver)
-    point = dict(zip(("ecoat_gpa", "scoat_gpa", "tcoat_mm"), coating, strict=True))
+    settings: Mapping[str, Any],
+) -> tuple[dict[str, Any], Rig]:
+    """The run's inputs and the rig of its conditions; an InputDataError (the solver
+    kind, its settings, the coating, conditions, effects) before anything is solved."""
+    checked_settings = get_solver(solver).check_settings(settings)
+    state = model_state_of(
+        coating["ecoat_gpa"], coating["scoat_gpa"], coating["tcoat_mm"], rig, effects, conditions
+    )
     inputs = solver_inputs(
-        point,
+        coating,
         rig,
         solver=solver,
         effects=effects,
         conditions=conditions,
-        solver_settings=adapter.check_settings(settings or {}),
+        solver_settings=checked_settings,
     )
-    state = model_state(inputs)
-    result = adapter.solve(inputs)
-    if result["status"] != "ok":
-        raise SolverError(f"{solver}: {result['reason']}")
+    return inputs, state.rig
+
+
+def _curve(result: Mapping[str, Any], coating: Mapping[str, float], rig: Rig) -> BendingCurve:
+    """A successful result as a :class:`BendingCurve`; a solver that reports no contact
+    arc or clamp moment (an external one) gets NaN there."""
     angle = np.asarray(result["angle_deg"], dtype=float)
     return BendingCurve(
         angle_deg=angle,
@@ -224,10 +156,16 @@ def _external(
         f60_n=result["f60_n"],
         theta_sat_deg=result["theta_sat_deg"],
         saturated=result["saturated"],
-        contact_arc_mm=np.full_like(angle, np.nan),
-        clamp_moment_nmm=np.full_like(angle, np.nan),
-        ecoat_gpa=float(coating[0]),
-        scoat_gpa=float(coating[1]),
-        tcoat_mm=float(coating[2]),
-        rig=state.rig,
+        contact_arc_mm=_optional(result, "contact_arc_mm", angle),
+        clamp_moment_nmm=_optional(result, "clamp_moment_nmm", angle),
+        ecoat_gpa=float(coating["ecoat_gpa"]),
+        scoat_gpa=float(coating["scoat_gpa"]),
+        tcoat_mm=float(coating["tcoat_mm"]),
+        rig=rig,
     )
+
+
+def _optional(result: Mapping[str, Any], key: str, angle_deg: np.ndarray) -> np.ndarray:
+    if key not in result:
+        return np.full_like(angle_deg, np.nan)
+    return np.asarray(result[key], dtype=float)

@@ -19,7 +19,7 @@ def attach_run_report(
     *,
     target_n: float,
     tolerance: float,
-    records: Sequence[dict[str, Any]],
+    records: Sequence[Any],
     chosen_number: int | None,
     note: str,
 ) -> bool:
@@ -34,16 +34,16 @@ def attach_run_report(
         warnings.warn(f"dashboard report skipped ({error.name} is not installed)", stacklevel=2)
         return False
     figure = go.Figure()
-    for record in sorted(records, key=lambda r: r.get("number", 0)):
-        if record["status"] != "ok":
+    for record in sorted(records, key=lambda r: r.number or 0):
+        if record.status != "ok":
             continue
-        chosen = record.get("number") == chosen_number
+        chosen = record.number == chosen_number
         figure.add_trace(
             go.Scatter(
-                x=record["angle_deg"],
-                y=record["force_n"],
+                x=record.angle_deg,
+                y=record.force_n,
                 mode="lines",
-                name=f"trial {record.get('number')}" + (" (chosen)" if chosen else ""),
+                name=f"trial {record.number}" + (" (chosen)" if chosen else ""),
                 line={"width": 3 if chosen else 1, "color": "crimson" if chosen else None},
                 opacity=1.0 if chosen else 0.45,
             )

@@ -14,15 +14,18 @@ from typing import Any
 
 import optuna
 
-__all__ = ["distributions", "quiet_optuna"]
+__all__ = ["distributions", "quiet_optuna", "suggest"]
 
 
-def distributions(space: Any) -> dict[str, optuna.distributions.FloatDistribution]:
+def distributions(space: Any) -> dict[str, optuna.distributions.BaseDistribution]:
     """``{name: FloatDistribution(low, high, log)}`` for every parameter of ``space``
     (a :class:`~surrogate.study.ParameterSpace`), in its order."""
-    return {
-        p.name: optuna.distributions.FloatDistribution(p.low, p.high, log=p.log) for p in space
-    }
+    return {p.name: optuna.distributions.FloatDistribution(p.low, p.high, log=p.log) for p in space}
+
+
+def suggest(trial: optuna.Trial, space: Any) -> dict[str, float]:
+    """Every parameter of ``space`` suggested on ``trial`` (a queued trial: its fixed values)."""
+    return {p.name: trial.suggest_float(p.name, p.low, p.high, log=p.log) for p in space}
 
 
 def quiet_optuna() -> None:

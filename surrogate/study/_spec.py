@@ -20,7 +20,6 @@ from ._space import COATING_PARAMETERS, PAPER_SPACE, ParameterSpace, ParameterSp
 __all__ = ["Budget", "Constraints", "StudySpec", "Targets", "load_study"]
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
-SOLVER_KINDS = ("builtin", "calculix", "lsdyna")
 _UNITS = {"ecoat_gpa": "GPa", "scoat_gpa": "GPa", "tcoat_mm": "mm"}
 _SECTIONS = (
     "study",
@@ -113,47 +112,18 @@ def load_study(path: str | Path) -> StudySpec:
 
 
 def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
+    """Validate the parsed TOML of a study file (``path`` resolves relative paths)."""
     where = str(path) if path is not None else "study"
     _only(data, _SECTIONS, where, "")
-    study = _section(data, "study", where)
-    _only(study, ("name", "seed", "storage"), where, "study")
-    name = study.get("name")
-    if not isinstance(name, str) or not _NAME.match(name):
-        raise InputDataError(
-            f"{where}: [study] name must be 1–64 letters, digits, '_', '.' or '-', got {name!r}"
-        )
-    seed = _int(study.get("seed", 0), where, "study.seed", low=0)
-    storage = study.get("storage")
-    if storage is not None and not isinstance(storage, str):
-        raise InputDataError(f"{where}: [study] storage must be a URL string, got {storage!r}")
+    name, seed, storage = _study(_section(data, "study", where), where)
     kind, solver_settings = _solver(_section(data, "solver", where), where, path)
     rig = _rig(_section(data, "rig", where), where)
     space = _space(_section(data, "parameters", where), where)
     targets, measurements = _targets(data, where, path)
     noise = _section(data, "measurements", where).get("noise_n")
     constraints = _constraints(_section(data, "constraints", where), where)
-    preferences = _section(data, "preferences", where)
-    _only(preferences, ("order",), where, "preferences")
-    order = tuple(preferences.get("order", ("tcoat_mm", "scoat_gpa")))
-    for item in order:
-        if item not in space.names:
-            raise InputDataError(
-                f"{where}: [preferences] order names {item!r}, which is not a "
-                f"parameter; use some of {', '.join(space.names)}"
-            )
-    model = _section(data, "model", where)
-    _only(model, ("effects",), where, "model")
-    effects = model.get("effects", [])
-    if not isinstance(effects, list) or not all(
-        isinstance(e, str) and e.isidentifier() for e in effects
-    ):
-        raise InputDataError(
-            f"{where}: [model] effects must be a list of effect names such as "
-            f'["tension"], got {effects!r}'
-        )
-    if len(set(effects)) != len(effects):
-        raise InputDataError(f"{where}: [model] effects names an effect twice: {effects!r}")
-    effects = tuple(effects)
+    order = _preferences(_section(data, "preferences", where), space, where)
+    effects = _effects(_section(data, "model", where), where)
     budget = _budget(_section(data, "budget", where), where)
     if targets.f60_n is None and measurements is None:
         raise InputDataError(
@@ -178,15 +148,61 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
     )
 
 
+def _study(section: dict[str, Any], where: str) -> tuple[str, int, str | None]:
+    """``[study]``: the name, the seed and the storage URL (None: next to the file)."""
+    _only(section, ("name", "seed", "storage"), where, "study")
+    name = section.get("name")
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise InputDataError(
+            f"{where}: [study] name must be 1–64 letters, digits, '_', '.' or '-', got {name!r}"
+        )
+    seed = _int(section.get("seed", 0), where, "study.seed", low=0)
+    storage = section.get("storage")
+    if storage is not None and not isinstance(storage, str):
+        raise InputDataError(f"{where}: [study] storage must be a URL string, got {storage!r}")
+    return name, seed, storage
+
+
+def _preferences(section: dict[str, Any], space: ParameterSpace, where: str) -> tuple[str, ...]:
+    """``[preferences] order``: the parameters to keep low among equals, first first."""
+    _only(section, ("order",), where, "preferences")
+    order = tuple(section.get("order", ("tcoat_mm", "scoat_gpa")))
+    for item in order:
+        if item not in space.names:
+            raise InputDataError(
+                f"{where}: [preferences] order names {item!r}, which is not a "
+                f"parameter; use some of {', '.join(space.names)}"
+            )
+    return order
+
+
+def _effects(section: dict[str, Any], where: str) -> tuple[str, ...]:
+    """``[model] effects``: the names of the effects to switch on, each once."""
+    _only(section, ("effects",), where, "model")
+    effects = section.get("effects", [])
+    if not isinstance(effects, list) or not all(
+        isinstance(e, str) and e.isidentifier() for e in effects
+    ):
+        raise InputDataError(
+            f"{where}: [model] effects must be a list of effect names such as "
+            f'["tension"], got {effects!r}'
+        )
+    if len(set(effects)) != len(effects):
+        raise InputDataError(f"{where}: [model] effects names an effect twice: {effects!r}")
+    return tuple(effects)
+
+
 def _solver(section: dict[str, Any], where: str, path: Path | None) -> tuple[str, dict[str, Any]]:
-    """``[solver]``: the kind and its validated settings (see :mod:`surrogate.solvers`)."""
-    from ..solvers import get_solver
+    """``[solver]``: the kind (one of the solver registry's) and its validated settings
+    (see :mod:`surrogate.solvers`)."""
+    from ..solvers import available_solvers, get_solver
 
     settings = dict(section)
     kind = settings.pop("kind", "builtin")
-    if kind not in SOLVER_KINDS:
+    kinds = available_solvers()
+    if kind not in kinds:
         raise InputDataError(
-            f"{where}: [solver] kind must be one of {', '.join(SOLVER_KINDS)}, got {kind!r}"
+            f"{where}: [solver] kind must be one of {', '.join(kinds)}, got {kind!r}"
         )
     base = path.parent if path is not None else Path.cwd()
     for key in ("template", "workdir_root"):

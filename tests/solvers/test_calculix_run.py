@@ -87,7 +87,7 @@ def test_main_loop_with_calculix_end_to_end(ccx, tmp_path, monkeypatch):
     path = tmp_path / "ccx_loop.toml"
     path.write_text(STUDY)
     counting = _Counting()
-    monkeypatch.setattr("surrogate.identify._loop.solve_inputs", counting)
+    monkeypatch.setattr("surrogate.identify._verify.solve_inputs", counting)
     result = run(path, progress=False)
 
     assert result.status == "verified", result.message

@@ -16,6 +16,7 @@ import surrogate
 from surrogate.solvers import get_solver
 from surrogate.solvers._base import _REGISTRY, Solver
 from surrogate.solvers._cache import input_hash
+from surrogate.storage import open_storage
 
 LOG_VARIABLE = "SURROGATE_TEST_SOLVER_LOG"
 
@@ -56,12 +57,12 @@ scale = 2.0
 
 [targets]
 f60_n = 19.9
-tolerance = 0.01
+tolerance = 0.05
 
 [budget]
 initial_samples = 4
 max_solver_calls = 9
-surrogate_trials = 120
+surrogate_trials = 100
 identifiability_runs = 0
 """
 
@@ -73,7 +74,9 @@ def _run(folder, storage: str, jobs: int, monkeypatch) -> tuple[Any, list[Any], 
     log = folder / "solver.log"
     monkeypatch.setenv(LOG_VARIABLE, str(log))
     result = surrogate.run(study, storage=storage, jobs=jobs, progress=False)
-    trials = optuna.load_study(study_name="scaled/verify", storage=storage).get_trials()
+    trials = optuna.load_study(
+        study_name="scaled/verify", storage=open_storage(storage)
+    ).get_trials()
     return result, trials, log.read_text().split()
 
 
@@ -111,3 +114,46 @@ def test_workers_and_the_planner_solve_the_same_runs_with_the_study_settings(
     trial = shared_trials[0]
     plain = surrogate.simulate(**trial.params)
     assert trial.user_attrs["f60_n"] == pytest.approx(2.0 * plain.f60_n, rel=1e-12)
+
+
+def _plan(folder, storage: str, n: int) -> tuple[Any, list[str]]:
+    from surrogate.identify._doe import make_design
+    from surrogate.identify._verify import enqueue, open_verify_study
+    from surrogate.study._spec import load_study
+
+    folder.mkdir()
+    (folder / "scaled.toml").write_text(STUDY)
+    spec = load_study(folder / "scaled.toml")
+    study = open_verify_study(spec, storage, heartbeat_s=None)
+    points = make_design("lhs", spec.space, n=n, seed=0).to_dict("records")
+    return spec, enqueue(study, spec, points, phase="plan")
+
+
+def test_a_worker_with_another_solver_version_fails_the_runs_instead_of_solving_others(
+    tmp_path, scaled_solver, monkeypatch
+):
+    from surrogate.identify._verify import finished_records, open_verify_study
+    from surrogate.identify._worker import work
+
+    storage = f"journal://{tmp_path / 'study.log'}"
+    spec, keys = _plan(tmp_path / "plan", storage, 3)
+    monkeypatch.setenv(LOG_VARIABLE, str(tmp_path / "solver.log"))
+    monkeypatch.setattr(ScaledSolver, "version", "test-2")  # this worker's solver is newer
+    result = work(spec, storage=storage, idle_timeout_s=0.0, progress=False)
+
+    assert (result.runs, result.failed, result.solved) == (3, 3, 0)
+    assert not (tmp_path / "solver.log").exists()  # nothing else was solved
+    records = finished_records(open_verify_study(spec, storage, heartbeat_s=None), keys)
+    assert sorted(records) == sorted(keys)  # the planner stops waiting: every run is over
+    assert all("differ from the planner's" in r.reason for r in records.values())
+
+
+def test_a_worker_whose_study_file_has_other_solver_settings_is_refused(tmp_path, scaled_solver):
+    from surrogate.identify._worker import work
+
+    storage = f"journal://{tmp_path / 'study.log'}"
+    _plan(tmp_path / "plan", storage, 2)
+    other = tmp_path / "other.toml"
+    other.write_text(STUDY.replace("scale = 2.0", "scale = 3.0"))
+    with pytest.raises(surrogate.InputDataError, match=r"its \[solver\] differs from the plan"):
+        work(other, storage=storage, idle_timeout_s=0.0, progress=False)

@@ -1,0 +1,313 @@
+"""The calibration problem: parameters, condition groups, measured points.
+
+What ``calibrate``, ``compare`` and ``diagnose`` share about one model against one
+set of measured curves: the parameter space (the coating and each enabled
+effect's ``effect.param``), the *condition groups* (tests whose conditions the
+model cannot tell apart — replicates, or a ``direction`` no enabled effect reads —
+share one solver run per parameter point), the measured points, and the misfit
+(measured minus model at every measured point; the model curve is the solver's on
+whole degrees, interpolated to the measured angles). Also: what the solver sees
+of a test as surrogate inputs (:func:`state_features`), the coat's section, the
+study's measurements and noise level (:func:`load_calibration`), and the checks
+of the commands' options.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._errors import InputDataError
+from ..effects import ModelState, get_effect, load_plugin
+from ..physics import bending_stiffness, plastic_moment
+from ..solvers import model_state_of
+from ..solvers._batch import solver_inputs
+from ..study._conditions import CONDITIONS
+from ..study._measurements import MeasurementSet, load_measurements
+from ..study._space import ParameterSpace, ParameterSpec
+from ..study._spec import StudySpec, load_study
+from ..study._units import gpa_to_mpa
+
+__all__ = [
+    "MIN_BUDGET",
+    "RIG_CONDITIONS",
+    "CalibrationProblem",
+    "calibration_study_name",
+    "check_budget",
+    "check_jobs",
+    "coat_section",
+    "load_calibration",
+    "model_label",
+    "state_features",
+]
+
+RIG_CONDITIONS = ("tension_n", "bending_length_mm", "width_mm")
+MIN_BUDGET = 10  # full-solver runs: fewer cannot fit even the initial design
+
+
+def model_label(effects: Sequence[str]) -> str:
+    """A model's name: ``base`` or its effects joined by ``+`` (sorted)."""
+    return "+".join(sorted(effects)) if effects else "base"
+
+
+def calibration_study_name(spec: StudySpec, effects: Sequence[str]) -> str:
+    return f"{spec.name}/calibrate/{model_label(effects)}"
+
+
+class CalibrationProblem:
+    """Parameters, condition groups and measured points of one calibration.
+
+    Parameters
+    ----------
+    spec : StudySpec
+        The study (coating ranges, rig, solver).
+    data : MeasurementSet
+        The measured curves.
+    effects : sequence of str
+        Enabled effects; their parameters are calibrated as ``effect.param``.
+    tests : sequence, optional
+        Use only these tests (the diagnosis leaves one out).
+    """
+
+    def __init__(
+        self,
+        spec: StudySpec,
+        data: MeasurementSet,
+        effects: Sequence[str] = (),
+        *,
+        tests: Sequence[Any] | None = None,
+    ) -> None:
+        self.spec = spec
+        self.data = data
+        self.effects = tuple(sorted(set(effects)))
+        specs = list(spec.space.parameters)
+        reads: set[str] = set(RIG_CONDITIONS)
+        for name in self.effects:
+            effect = get_effect(name)
+            reads.update(effect.reads)
+            for p in effect.parameters:
+                specs.append(
+                    ParameterSpec(f"{name}.{p.name}", p.low, p.high, log=p.log, unit=p.unit)
+                )
+        self.space = ParameterSpace.of(specs)
+        self.conditions = tuple(
+            c for c in (*CONDITIONS, *data.covariates) if c in reads and c in data.tests
+        )
+        test_ids = list(data.tests.test_id) if tests is None else list(tests)
+        self.test_ids = test_ids
+        self.groups: list[dict[str, Any]] = []
+        group_of: dict[tuple[Any, ...], int] = {}
+        self.test_group: list[int] = []
+        table = data.tests.set_index("test_id")
+        for test_id in test_ids:
+            row = table.loc[test_id]
+            conditions = {
+                c: row[c] if isinstance(row[c], str) else float(row[c]) for c in self.conditions
+            }
+            key = tuple(conditions[c] for c in self.conditions)
+            if key not in group_of:
+                group_of[key] = len(self.groups)
+                self.groups.append(conditions)
+            self.test_group.append(group_of[key])
+        self.angle_deg = np.arange(0.0, np.floor(spec.rig.max_angle_deg) + 1.0)
+        self._points(data, test_ids)
+
+    def _points(self, data: MeasurementSet, test_ids: list[Any]) -> None:
+        angles, forces, group, test = [], [], [], []
+        for index, test_id in enumerate(test_ids):
+            a, f = data.curve(test_id)
+            if a.max() > self.angle_deg[-1] or a.min() < 0.0:
+                raise InputDataError(
+                    f"test {test_id!r} has angles outside 0–{self.angle_deg[-1]:g}°, "
+                    "the rig's range; raise [rig] max_angle_deg or drop those rows"
+                )
+            angles.append(a)
+            forces.append(f)
+            group.append(np.full(a.size, self.test_group[index]))
+            test.append(np.full(a.size, index))
+        angle = np.concatenate(angles)
+        self.measured_n = np.concatenate(forces)
+        self.point_group = np.concatenate(group)
+        self.point_test = np.concatenate(test)
+        self._lo = np.minimum(np.floor(angle).astype(int), self.angle_deg.size - 2)
+        self._w = angle - self._lo
+        self.point_angle_deg = angle
+        self._count = np.bincount(self.point_test, minlength=len(test_ids))
+
+    @property
+    def n_points(self) -> int:
+        return int(self.measured_n.size)
+
+    # -- parameters ----------------------------------------------------------------------------
+    def split(self, theta: Mapping[str, float]) -> tuple[dict[str, float], dict[str, Any]]:
+        """Coating point and effects mapping of a parameter vector."""
+        coating = {n: float(theta[n]) for n in self.spec.space.names}
+        effects: dict[str, dict[str, float]] = {name: {} for name in self.effects}
+        for name in self.space.names:
+            if "." in name:
+                effect, param = name.split(".", 1)
+                effects[effect][param] = float(theta[name])
+        return coating, effects
+
+    def state(self, theta: np.ndarray, group: int) -> ModelState:
+        """The model state the solver sees for parameter vector ``theta`` at a group."""
+        coating, effects = self.split(dict(zip(self.space.names, theta, strict=True)))
+        return model_state_of(
+            coating["ecoat_gpa"],
+            coating["scoat_gpa"],
+            coating["tcoat_mm"],
+            self.spec.rig,
+            effects,
+            self.groups[group],
+        )
+
+    def inputs(self, theta: Mapping[str, float], group: int) -> dict[str, Any]:
+        coating, effects = self.split(theta)
+        return solver_inputs(
+            coating,
+            self.spec.rig,
+            solver=self.spec.solver,
+            effects=effects,
+            conditions=self.groups[group],
+            solver_settings=self.spec.solver_settings,
+        )
+
+    # -- misfit --------------------------------------------------------------------------------
+    def model_at_points(self, curves: np.ndarray) -> np.ndarray:
+        """Model force at every measured point from (G, A) curves on whole degrees."""
+        c = curves[self.point_group]
+        rows = np.arange(self.point_group.size)
+        return c[rows, self._lo] * (1.0 - self._w) + c[rows, self._lo + 1] * self._w
+
+    def residuals(self, curves: np.ndarray) -> np.ndarray:
+        """Measured minus model at every measured point."""
+        return self.measured_n - self.model_at_points(curves)
+
+    def rmse(self, curves: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(self.residuals(curves) ** 2)))
+
+    def rmse_per_test(self, curves: np.ndarray) -> dict[str, float]:
+        r2 = np.bincount(self.point_test, self.residuals(curves) ** 2, len(self.test_ids))
+        rms = np.sqrt(r2 / self._count)
+        return {str(t): float(v) for t, v in zip(self.test_ids, rms, strict=True)}
+
+    def _batch_points(self, curves: np.ndarray) -> np.ndarray:
+        rows = np.arange(self.point_group.size)
+        c = curves[:, self.point_group]  # (m, P, A)
+        return c[:, rows, self._lo] * (1.0 - self._w) + c[:, rows, self._lo + 1] * self._w
+
+    def batch_rmse(self, curves: np.ndarray) -> np.ndarray:
+        """RMSE of each of (m, G, A) curve sets."""
+        residual = self.measured_n - self._batch_points(curves)
+        return np.sqrt(np.mean(residual**2, axis=1))
+
+    def features(self, X: np.ndarray, groups: np.ndarray) -> np.ndarray:
+        """Surrogate inputs (n, f) of parameter vectors ``X`` (n, p) at condition ``groups``
+        (n,): :func:`state_features` of each run's model state."""
+        return np.array(
+            [
+                state_features(self.state(x, int(g)))
+                for x, g in zip(np.atleast_2d(X), groups, strict=True)
+            ]
+        )
+
+
+def state_features(state: ModelState) -> np.ndarray:
+    """What the solver sees, as surrogate inputs (physical, dimensionless where it helps).
+
+    Every effect acts through the model state of a test (design.md §4), so a
+    surrogate over the state serves every model and every test condition: the
+    tension effect's ``Ecoat·(1 + kE·T)`` is just another stiffness to it.
+    Features: log of the total bending stiffness, of the plastic moment, of the
+    yield strain and of Tcoat; the hardening ratio; the bare webbing's share of
+    the stiffness; the probe friction; the self-weight over the strip's
+    stiffness (``q·L³/(D·b)``); the strip's stiffness over the clamp's
+    (``D·b/(l·k)``); the end tension over the elastic force scale
+    (``T·l²/(D·b)``); the bending length and the width.
+    """
+    rig = state.rig
+    coat = bending_stiffness(state.ecoat_mpa, state.tcoat_mm, rig.thickness_mm)
+    total = coat + state.extra_stiffness_nmm
+    plastic = plastic_moment(state.scoat_mpa, state.tcoat_mm, rig.thickness_mm)
+    flexural = total * rig.width_mm  # D·b [N·mm²]
+    clamp = (
+        0.0
+        if state.clamp_stiffness_nmm is None
+        else flexural / rig.bending_length_mm / state.clamp_stiffness_nmm
+    )
+    return np.array(
+        [
+            np.log(total),
+            np.log(plastic),
+            np.log(state.scoat_mpa / state.ecoat_mpa),
+            np.log(state.tcoat_mm),
+            state.hardening_ratio,
+            state.extra_stiffness_nmm / total,
+            rig.friction,
+            state.line_load_n_mm * rig.free_length_mm**3 / flexural,
+            clamp,
+            rig.tension_n * rig.bending_length_mm**2 / flexural,
+            np.log(rig.bending_length_mm),
+            np.log(rig.width_mm),
+        ]
+    )
+
+
+def coat_section(params: Mapping[str, float], thickness_mm: float) -> tuple[float, float]:
+    """Bending stiffness D [N·mm] and plastic moment Mp [N] per unit width of a coating
+    given in the paper's units (``ecoat_gpa``, ``scoat_gpa``, ``tcoat_mm``)."""
+    tcoat = params["tcoat_mm"]
+    return (
+        bending_stiffness(gpa_to_mpa(params["ecoat_gpa"]), tcoat, thickness_mm),
+        plastic_moment(gpa_to_mpa(params["scoat_gpa"]), tcoat, thickness_mm),
+    )
+
+
+def load_calibration(
+    study: str | Path | StudySpec,
+    effects: Sequence[str] | None,
+    plugins: Sequence[str],
+) -> tuple[StudySpec, MeasurementSet, tuple[str, ...], float]:
+    """The study, its measurements, the model's effects and the noise level [N].
+
+    Plug-ins are imported first; unknown effects, a study without measurements
+    and a noise level neither stated nor estimable fail here, before anything is
+    written.
+    """
+    for module in plugins:
+        load_plugin(module)
+    spec = study if isinstance(study, StudySpec) else load_study(study)
+    if spec.measurements_file is None:
+        raise InputDataError(
+            f"study {spec.name!r} has no [measurements] file; add one to calibrate against curves"
+        )
+    data = load_measurements(spec.measurements_file)
+    chosen = tuple(spec.effects) if effects is None else tuple(effects)
+    for name in chosen:
+        get_effect(name)  # unknown names fail here, before anything is written
+    noise = spec.noise_n if spec.noise_n is not None else data.noise_n
+    if noise is None:
+        raise InputDataError(
+            f"{spec.measurements_file}: no replicate tests to estimate the noise; "
+            "add [measurements] noise_n (N) to the study"
+        )
+    return spec, data, chosen, float(noise)
+
+
+def check_jobs(jobs: Any, *, all_cpus: bool = False) -> None:
+    """``--jobs``: a whole number ≥ 1 (or None for every CPU, where ``all_cpus``)."""
+    if jobs is None and all_cpus:
+        return
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+        raise InputDataError(f"--jobs must be ≥ 1, got {jobs}")
+
+
+def check_budget(budget: Any) -> None:
+    """``--budget``: None (the study's) or a whole number ≥ ``MIN_BUDGET`` of solver runs."""
+    if budget is None:
+        return
+    if isinstance(budget, bool) or not isinstance(budget, int) or budget < MIN_BUDGET:
+        raise InputDataError(f"--budget must be ≥ {MIN_BUDGET} solver runs, got {budget}")
