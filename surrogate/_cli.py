@@ -457,11 +457,7 @@ def _add_calibrate(commands: _Subparsers) -> argparse.ArgumentParser:
 def _calibrate(args: argparse.Namespace) -> int:
     from .calibration._loop import calibrate
 
-    if args.jobs < 1:
-        raise InputDataError(f"--jobs must be ≥ 1, got {args.jobs}")
-    if args.budget is not None and args.budget < 10:
-        raise InputDataError(f"--budget must be ≥ 10 solver runs, got {args.budget}")
-    result = calibrate(
+    result = calibrate(  # validates --jobs and --budget (the API refuses what the CLI does)
         args.study,
         effects=args.effect,
         plugins=args.plugin,

@@ -76,7 +76,6 @@ __all__ = [
     "data_hash",
 ]
 
-DEFAULT_CALIBRATION_CALLS = 200
 _SEARCH_BATCH = 25
 SETTLED = 0.01  # relative RMSE improvement below which the global phase has settled
 STALE_LIMIT = 2  # the local phase finishes what the global one leaves

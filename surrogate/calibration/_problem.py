@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InputDataError
-from ..effects import ModelState, get_effect, load_plugin
+from ..effects import ModelState, check_effects, get_effect, load_plugin
 from ..physics import bending_stiffness, plastic_moment
 from ..solvers import model_state_of
 from ..solvers._batch import solver_inputs
@@ -280,14 +280,13 @@ def load_calibration(
     for module in plugins:
         load_plugin(module)
     spec = study if isinstance(study, StudySpec) else load_study(study)
+    check_effects(spec.effects)  # unknown names fail here, before anything is written
     if spec.measurements_file is None:
         raise InputDataError(
             f"study {spec.name!r} has no [measurements] file; add one to calibrate against curves"
         )
     data = load_measurements(spec.measurements_file)
-    chosen = tuple(spec.effects) if effects is None else tuple(effects)
-    for name in chosen:
-        get_effect(name)  # unknown names fail here, before anything is written
+    chosen = tuple(spec.effects) if effects is None else check_effects(effects)
     noise = spec.noise_n if spec.noise_n is not None else data.noise_n
     if noise is None:
         raise InputDataError(

@@ -14,7 +14,7 @@ import dataclasses
 import importlib
 import os
 import sys
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -26,6 +26,7 @@ __all__ = [
     "EffectParameter",
     "ModelState",
     "available_effects",
+    "check_effects",
     "get_effect",
     "load_plugin",
     "register_effect",
@@ -138,6 +139,15 @@ def get_effect(name: str) -> Effect:
             f"{', '.join(sorted(_REGISTRY))} (or load a plug-in with --plugin)"
         )
     return _REGISTRY[name]
+
+
+def check_effects(names: Iterable[str]) -> tuple[str, ...]:
+    """``names`` if each is a registered effect; else the one-line error of the first
+    unknown (every command checks a study's ``[model] effects`` with this)."""
+    names = tuple(names)
+    for name in names:
+        get_effect(name)
+    return names
 
 
 def available_effects() -> list[str]:

@@ -12,6 +12,7 @@ import pandas as pd
 
 from .._errors import InputDataError
 from .._io import atomic_write_text
+from ..effects import check_effects
 from ..gp import CoatingSurrogate
 from ..solvers._batch import evaluate_design
 from ..study._rig import Rig
@@ -19,6 +20,7 @@ from ..study._samples import SampleSet, read_points
 from ..study._space import PAPER_SPACE, ParameterSpace
 from ..study._spec import StudySpec, load_study
 from ._doe import make_design
+from ._objective import refuse_model_effects
 
 __all__ = ["DoeResult", "FitResult", "PredictResult", "doe", "fit", "fit_surrogate", "predict"]
 
@@ -65,10 +67,16 @@ class PredictResult:
         return asdict(self)
 
 
-def _study_or_none(study: str | Path | StudySpec | None) -> StudySpec | None:
-    if study is None or isinstance(study, StudySpec):
-        return study
-    return load_study(study)
+def _study_or_none(study: str | Path | StudySpec | None, *, runs: bool) -> StudySpec | None:
+    """The study (its effects checked: runs of the bare coating refuse any), or None."""
+    if study is None:
+        return None
+    spec = study if isinstance(study, StudySpec) else load_study(study)
+    if runs:
+        refuse_model_effects(spec, "surrogate doe --run")
+    else:
+        check_effects(spec.effects)
+    return spec
 
 
 def doe(
@@ -92,7 +100,7 @@ def doe(
     ``points_file``: take the points from this CSV (a design of one's own, with
     the parameter columns) instead of generating them; ``design`` is then ``file``.
     """
-    spec = _study_or_none(study)
+    spec = _study_or_none(study, runs=run)
     space = spec.space if spec is not None else PAPER_SPACE
     rig = spec.rig if spec is not None else Rig()
     seed = seed if seed is not None else (spec.seed if spec is not None else 0)

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from .._errors import InputDataError
 from .._io import atomic_write_text
+from ..effects import check_effects
 from ..study._spec import StudySpec, load_study
 from ..study._units import gpa_to_mpa
 
@@ -87,6 +88,7 @@ def export(
     if units not in LSDYNA_UNITS:
         raise InputDataError(f"--units must be one of {', '.join(LSDYNA_UNITS)}, got {units!r}")
     spec = study if isinstance(study, StudySpec) else load_study(study)
+    check_effects(spec.effects)
     if output is not None and not Path(output).parent.exists():
         raise InputDataError(f"output folder {Path(output).parent} does not exist; create it first")
     url = storage or spec.default_storage()

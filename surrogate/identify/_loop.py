@@ -21,7 +21,6 @@ from scipy.stats import norm
 
 from .._errors import InputDataError
 from .._log import show_progress
-from ..effects import get_effect
 from ..storage._dashboard import attach_run_report
 from ..storage._optuna import distributions
 from ..storage._storage import check_workers
@@ -29,7 +28,7 @@ from ..study._spec import StudySpec, Targets, load_study
 from ._commands import fit_surrogate
 from ._doe import make_design
 from ._identifiability import assess_identifiability
-from ._objective import constraint_values, is_feasible, relative_misfit
+from ._objective import constraint_values, is_feasible, refuse_model_effects, relative_misfit
 from ._verify import Verification, Verifier, open_verify_study, target_of, verify_study_name
 from ._worker import HEARTBEAT_S, WorkerDispatcher
 
@@ -164,20 +163,6 @@ def _with_overrides(
         )
     refuse_model_effects(spec, "surrogate run")
     return spec
-
-
-def refuse_model_effects(spec: StudySpec, command: str) -> None:
-    """The main job identifies the bare coating: a study with ``[model] effects`` is
-    refused in one line (an unknown name first, as every command refuses it)."""
-    for name in spec.effects:
-        get_effect(name)
-    if spec.effects:
-        raise InputDataError(
-            f"{spec.path}: {command} identifies the bare coating for an F60 target and "
-            f"cannot use [model] effects = {list(spec.effects)} (their parameters are "
-            "calibrated against measured curves); remove them, or use surrogate calibrate "
-            "/ compare / diagnose"
-        )
 
 
 # -- the search on the surrogate -------------------------------------------------------------

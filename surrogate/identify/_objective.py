@@ -1,4 +1,4 @@
-"""The misfit and the constraint rules: one place for each definition.
+"""The misfit and the constraint rules of the main job: one place for each definition.
 
 Constraint values follow Optuna's rule: ``c ≤ 0`` is feasible, for every ``c``.
 """
@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from .._errors import InputDataError
+from ..effects import check_effects
 from ..study._spec import StudySpec
 
 __all__ = [
@@ -14,6 +16,7 @@ __all__ = [
     "constraint_values",
     "is_feasible",
     "meets_target",
+    "refuse_model_effects",
     "relative_misfit",
 ]
 
@@ -56,3 +59,15 @@ def is_feasible(constraints: Mapping[str, float]) -> bool:
 def meets_target(misfit: float, constraints: Mapping[str, float], tolerance: float) -> bool:
     """A verified point meets the study: misfit within tolerance, every constraint met."""
     return misfit <= tolerance and is_feasible(constraints)
+
+
+def refuse_model_effects(spec: StudySpec, command: str) -> None:
+    """The main job identifies the bare coating: a study with ``[model] effects`` is
+    refused in one line (an unknown name first, as every command refuses it)."""
+    if check_effects(spec.effects):
+        raise InputDataError(
+            f"{spec.path}: {command} works on the bare coating (the main job) and "
+            f"cannot use [model] effects = {list(spec.effects)} (their parameters are "
+            "calibrated against measured curves); remove them, or use surrogate calibrate "
+            "/ compare / diagnose"
+        )

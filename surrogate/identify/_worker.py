@@ -44,6 +44,7 @@ from ..storage._storage import (
     storage_errors,
 )
 from ..study._spec import StudySpec, load_study
+from ._objective import refuse_model_effects
 from ._verify import (
     Verification,
     as_planned,
@@ -178,6 +179,7 @@ def work(
         One line per finished run on stderr.
     """
     spec = study if isinstance(study, StudySpec) else load_study(study)
+    refuse_model_effects(spec, "surrogate worker")
     check_workers(storage, jobs)
     if jobs < 1:
         raise InputDataError(f"--jobs must be ≥ 1 for a worker, got {jobs}")

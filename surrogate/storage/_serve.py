@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .._errors import InputDataError
+from ..effects import check_effects
 from ..study._spec import StudySpec, load_study
 from ._storage import missing_local_storage, open_storage
 
@@ -18,6 +19,7 @@ def dashboard(
 ) -> None:
     """Serve optuna-dashboard for the study's storage until interrupted."""
     spec = study if isinstance(study, StudySpec) else load_study(study)
+    check_effects(spec.effects)
     if not 1024 <= port <= 65535:
         raise InputDataError(f"--port must be in [1024, 65535], got {port}")
     url = storage or spec.default_storage()

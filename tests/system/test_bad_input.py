@@ -24,6 +24,8 @@ from tests.workers.fixed_cost import FixedCostSolve
 
 REPO = Path(__file__).resolve().parents[2]
 STUDY = (REPO / "studies" / "paper_coating.toml").read_text()
+MAGIC = STUDY + '\n[model]\neffects = ["magic"]\n'
+HARDENING = '\n[model]\neffects = ["hardening"]\n'
 SIM = ["simulate", "--ecoat", "1", "--scoat", "0.2", "--tcoat", "0.012"]
 
 
@@ -157,6 +159,27 @@ CASES = [
         "storage-study-file-differs-from-plan",
         {"changed.toml": _study("friction = 0.1", "friction = 0.3")},
         ["worker", "changed.toml", "--storage", "sqlite:///{d}/paper-coating.db"],
+    ),
+    # [model] effects: an unknown name is refused by every command that reads the study;
+    # the main job (run, worker, doe --run) refuses effects it cannot use
+    *[
+        (f"effect-unknown-{argv[0]}", {"magic.toml": MAGIC}, argv)
+        for argv in (
+            ["run", "magic.toml"],
+            ["worker", "magic.toml", "--storage", "{d}/study.log"],
+            ["export", "magic.toml"],
+            ["dashboard", "magic.toml"],
+            ["doe", "--study", "magic.toml", "--out", "x.csv"],
+            ["calibrate", "magic.toml"],
+            ["compare", "magic.toml"],
+            ["diagnose", "magic.toml"],
+        )
+    ],
+    ("effect-known-run", {"hard.toml": STUDY + HARDENING}, ["run", "hard.toml"]),
+    (
+        "effect-known-doe-run",
+        {"hard.toml": STUDY + HARDENING},
+        ["doe", "--study", "hard.toml", "--run", "--n", "2", "--out", "x.csv"],
     ),
 ]
 

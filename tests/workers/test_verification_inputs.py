@@ -106,9 +106,7 @@ def test_workers_and_the_planner_solve_the_same_runs_with_the_study_settings(
     assert _summary(shared_trials) == _summary(alone_trials)
     assert all(t.state == TrialState.COMPLETE for t in shared_trials)
     # every run solved once, with the settings: the hash the trial carries is the one solved
-    assert collections.Counter(shared_log) == {
-        t.user_attrs["input_hash"]: 1 for t in shared_trials
-    }
+    assert collections.Counter(shared_log) == {t.user_attrs["input_hash"]: 1 for t in shared_trials}
     assert sorted(shared_log) == sorted(alone_log)
     # and the setting took effect in the workers: F60 is twice the built-in's
     trial = shared_trials[0]
