@@ -40,6 +40,7 @@ __all__ = [
     "failed_result",
     "get_solver",
     "guarded",
+    "ok_result",
     "register_solver",
     "run_command",
     "work_directory",
@@ -144,18 +145,25 @@ def curve_result(
         force_n = np.concatenate(([0.0], force_n))
         force_perp_n = np.concatenate(([0.0], force_perp_n))
     grid = np.arange(0.0, end + 1.0)
-    force = np.interp(grid, angle, force_n)
-    perp = np.interp(grid, angle, force_perp_n)
-    features = curve_features(grid, force)
+    return ok_result(grid, np.interp(grid, angle, force_n), np.interp(grid, angle, force_perp_n))
+
+
+def ok_result(
+    angle_deg: np.ndarray, force_n: np.ndarray, force_perp_n: np.ndarray, **curves: np.ndarray
+) -> dict[str, Any]:
+    """The plain-JSON result of a successful run on whole degrees: the features (always
+    from :func:`surrogate.physics.curve_features`), the curve and any further ``curves``."""
+    features = curve_features(angle_deg, force_n)
     return {
         "status": "ok",
         "reason": "",
         "f60_n": features.f60_n,
         "theta_sat_deg": features.theta_sat_deg,
         "saturated": features.saturated,
-        "angle_deg": grid.tolist(),
-        "force_n": force.tolist(),
-        "force_perp_n": perp.tolist(),
+        "angle_deg": np.asarray(angle_deg).tolist(),
+        "force_n": np.asarray(force_n).tolist(),
+        "force_perp_n": np.asarray(force_perp_n).tolist(),
+        **{name: np.asarray(values).tolist() for name, values in curves.items()},
     }
 
 

@@ -18,13 +18,12 @@ from ..physics import (
     SOLVER_VERSION,
     CoatingSection,
     RodSolution,
-    curve_features,
     default_mesh,
     solve_rod,
     uniform_mesh,
 )
 from ..study import Rig
-from ._base import Solver, guarded, register_solver
+from ._base import Solver, guarded, ok_result, register_solver
 from ._state import model_state
 
 __all__ = ["BuiltinSolver", "coating_section", "rod_mesh", "solve_state"]
@@ -77,19 +76,13 @@ def solve_state(state: ModelState) -> RodSolution:
 
 def _result(solution: RodSolution) -> dict[str, Any]:
     """The plain-JSON result of a solved rod: features, curve, contact arc, clamp moment."""
-    features = curve_features(solution.angle_deg, solution.force_n)
-    return {
-        "status": "ok",
-        "reason": "",
-        "f60_n": features.f60_n,
-        "theta_sat_deg": features.theta_sat_deg,
-        "saturated": features.saturated,
-        "angle_deg": solution.angle_deg.tolist(),
-        "force_n": solution.force_n.tolist(),
-        "force_perp_n": solution.force_perp_n.tolist(),
-        "contact_arc_mm": solution.contact_arc_mm.tolist(),
-        "clamp_moment_nmm": solution.clamp_moment_nmm.tolist(),
-    }
+    return ok_result(
+        solution.angle_deg,
+        solution.force_n,
+        solution.force_perp_n,
+        contact_arc_mm=solution.contact_arc_mm,
+        clamp_moment_nmm=solution.clamp_moment_nmm,
+    )
 
 
 @register_solver
