@@ -286,6 +286,7 @@ def _add_doe(commands: _Subparsers) -> argparse.ArgumentParser:
         help="result cache folder (default: .solver-cache next to --out)",
     )
     design.add_argument("--out", type=Path, required=True, help="CSV to write")
+    _add_plugin(design)
     _add_json(design)
     return design
 
@@ -303,6 +304,7 @@ def _doe(args: argparse.Namespace) -> int:
         out=args.out,
         cache_dir=args.cache,
         points_file=args.points_file,
+        plugins=args.plugin,
         progress=not args.json and sys.stderr.isatty(),
     )
     if args.json:
@@ -580,6 +582,7 @@ def _add_export(commands: _Subparsers) -> argparse.ArgumentParser:
         default="mm-N-s",
         help="unit system of your deck (default mm-N-s: MPa)",
     )
+    _add_plugin(exporting)
     _add_json(exporting)
     return exporting
 
@@ -588,7 +591,12 @@ def _export(args: argparse.Namespace) -> int:
     from .identify._export import export
 
     result = export(
-        args.study, format=args.format, output=args.output, storage=args.storage, units=args.units
+        args.study,
+        format=args.format,
+        output=args.output,
+        storage=args.storage,
+        units=args.units,
+        plugins=args.plugin,
     )
     if args.json:
         _print_json(result.to_json())
@@ -678,6 +686,7 @@ def _add_dashboard(commands: _Subparsers) -> argparse.ArgumentParser:
     board.add_argument("study", type=Path, help="study file")
     _add_storage(board)
     board.add_argument("--port", type=int, default=8080, help="port on 127.0.0.1 (default 8080)")
+    _add_plugin(board)
     return board
 
 
@@ -685,7 +694,7 @@ def _dashboard(args: argparse.Namespace) -> int:
     from .storage._serve import dashboard
 
     try:
-        dashboard(args.study, storage=args.storage, port=args.port)
+        dashboard(args.study, storage=args.storage, port=args.port, plugins=args.plugin)
     except KeyboardInterrupt:
         pass
     return 0

@@ -2,31 +2,42 @@
 
 One start method for every parallel part of the package (batch evaluation, the
 calibration's solver runs, the diagnosis's refits, verification workers):
-``fork`` where the platform has it — fast, and effects registered in this process
-(plug-ins, or in code) exist in the children too. Each child limits its BLAS to
-one thread: several processes each spinning a BLAS thread pool on the same cores
-run about ten times slower. Without ``fork`` (Windows, macOS default) the work
-runs serially in this process rather than losing registered plug-ins.
+``fork`` on Linux — fast, and effects and solvers registered in this process
+(plug-ins, or in code) exist in the children too; database connections a child
+inherits are let go of at the fork (:mod:`surrogate.storage._storage`). Each child
+limits its BLAS to one thread: several processes each spinning a BLAS thread pool
+on the same cores run about ten times slower. Elsewhere (macOS, where fork is
+unsafe with the system's libraries; Windows, which has none) a task pool runs
+serially in this process rather than losing registered plug-ins, and worker
+processes are spawned.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import os
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any, TypeVar
 
 from ._errors import InputDataError
 
-__all__ = ["can_fork", "check_jobs", "imap_unordered", "process_context", "worker_count"]
+__all__ = [
+    "can_fork",
+    "check_jobs",
+    "imap_unordered",
+    "one_blas_thread",
+    "process_context",
+    "worker_count",
+]
 
 T = TypeVar("T")
 R = TypeVar("R")
 
 
 def can_fork() -> bool:
-    return "fork" in multiprocessing.get_all_start_methods()
+    return sys.platform.startswith("linux")
 
 
 def process_context() -> Any:
@@ -41,10 +52,13 @@ def one_blas_thread() -> None:
     threadpool_limits(1)
 
 
-def check_jobs(jobs: Any, *, name: str = "jobs", minimum: int = 1) -> int:
-    """``jobs`` as a whole number ≥ ``minimum``, or an InputDataError naming it."""
+def check_jobs(jobs: Any, *, minimum: int = 1, every_cpu: bool = False) -> Any:
+    """``--jobs``: a whole number ≥ ``minimum`` (None too where ``every_cpu``: all CPUs);
+    else the one-line error every command and API function gives."""
+    if jobs is None and every_cpu:
+        return jobs
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < minimum:
-        raise InputDataError(f"{name} must be a whole number ≥ {minimum}, got {jobs!r}")
+        raise InputDataError(f"--jobs must be ≥ {minimum}, got {jobs!r}")
     return jobs
 
 

@@ -50,7 +50,7 @@ import optuna
 
 from .._errors import InputDataError
 from .._log import show_progress
-from .._pool import imap_unordered, worker_count
+from .._pool import check_jobs, imap_unordered, worker_count
 from ..effects import available_effects, get_effect
 from ..storage._optuna import quiet_optuna
 from ._compare import BANDS, angle_bands
@@ -59,7 +59,6 @@ from ._loop import SolverRuns, calibrate, calibration_note
 from ._problem import (
     CalibrationProblem,
     calibration_study_name,
-    check_jobs,
     load_calibration,
     model_label,
 )
@@ -137,7 +136,7 @@ def diagnose(
     progress : bool
         Log each step at INFO (logger ``surrogate``; on stderr unless configured).
     """
-    check_jobs(jobs, all_cpus=True)  # a bad value fails before any work
+    check_jobs(jobs, every_cpu=True)  # a bad value fails before any work
     if progress:
         show_progress()
     spec, data, chosen, noise = load_calibration(study, effects, plugins)

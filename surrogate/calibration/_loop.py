@@ -40,7 +40,7 @@ from scipy.stats import qmc
 
 from .._errors import InputDataError
 from .._log import show_progress
-from .._pool import imap_unordered
+from .._pool import check_jobs, imap_unordered
 from ..gp import CurveSurrogate
 from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
@@ -59,7 +59,6 @@ from ._problem import (
     CalibrationProblem,
     calibration_study_name,
     check_budget,
-    check_jobs,
     coat_section,
     load_calibration,
     model_label,

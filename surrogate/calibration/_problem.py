@@ -37,7 +37,6 @@ __all__ = [
     "CalibrationProblem",
     "calibration_study_name",
     "check_budget",
-    "check_jobs",
     "coat_section",
     "load_calibration",
     "model_label",
@@ -294,14 +293,6 @@ def load_calibration(
             "add [measurements] noise_n (N) to the study"
         )
     return spec, data, chosen, float(noise)
-
-
-def check_jobs(jobs: Any, *, all_cpus: bool = False) -> None:
-    """``--jobs``: a whole number ≥ 1 (or None for every CPU, where ``all_cpus``)."""
-    if jobs is None and all_cpus:
-        return
-    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
-        raise InputDataError(f"--jobs must be ≥ 1, got {jobs}")
 
 
 def check_budget(budget: Any) -> None:

@@ -141,9 +141,12 @@ def get_effect(name: str) -> Effect:
     return _REGISTRY[name]
 
 
-def check_effects(names: Iterable[str]) -> tuple[str, ...]:
-    """``names`` if each is a registered effect; else the one-line error of the first
-    unknown (every command checks a study's ``[model] effects`` with this)."""
+def check_effects(names: Iterable[str], plugins: Iterable[str] = ()) -> tuple[str, ...]:
+    """``names`` if each is a registered effect once ``plugins`` are imported; else the
+    one-line error of the first unknown (every command that reads a study's
+    ``[model] effects`` checks them with this)."""
+    for module in plugins:
+        load_plugin(module)
     names = tuple(names)
     for name in names:
         get_effect(name)

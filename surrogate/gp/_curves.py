@@ -88,14 +88,6 @@ class CurveSurrogate:
         self._kernels = [gp.kernel_ for gp in self.gps_]
         return self
 
-    @property
-    def mean_(self) -> np.ndarray:
-        return self.pca_.mean
-
-    @property
-    def basis_(self) -> np.ndarray:
-        return self.pca_.basis
-
     @staticmethod
     def _trend(Z: np.ndarray, scores: np.ndarray) -> np.ndarray:
         """Universal kriging: a linear trend in the features (ridge-stabilised)."""

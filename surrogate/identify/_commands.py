@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -67,7 +68,9 @@ class PredictResult:
         return asdict(self)
 
 
-def _study_or_none(study: str | Path | StudySpec | None, *, runs: bool) -> StudySpec | None:
+def _study_or_none(
+    study: str | Path | StudySpec | None, *, runs: bool, plugins: Sequence[str]
+) -> StudySpec | None:
     """The study (its effects checked: runs of the bare coating refuse any), or None."""
     if study is None:
         return None
@@ -75,7 +78,7 @@ def _study_or_none(study: str | Path | StudySpec | None, *, runs: bool) -> Study
     if runs:
         refuse_model_effects(spec, "surrogate doe --run")
     else:
-        check_effects(spec.effects)
+        check_effects(spec.effects, plugins)
     return spec
 
 
@@ -91,6 +94,7 @@ def doe(
     cache_dir: str | Path | None = None,
     progress: bool = True,
     points_file: str | Path | None = None,
+    plugins: Sequence[str] = (),
 ) -> DoeResult:
     """Make a design (ranges from ``study`` or the paper's) and optionally run it.
 
@@ -99,8 +103,9 @@ def doe(
     JSON sidecar). Cache: ``cache_dir`` or ``.solver-cache/`` next to ``out``.
     ``points_file``: take the points from this CSV (a design of one's own, with
     the parameter columns) instead of generating them; ``design`` is then ``file``.
+    ``plugins``: modules of effects the study's ``[model] effects`` name.
     """
-    spec = _study_or_none(study, runs=run)
+    spec = _study_or_none(study, runs=run, plugins=plugins)
     space = spec.space if spec is not None else PAPER_SPACE
     rig = spec.rig if spec is not None else Rig()
     seed = seed if seed is not None else (spec.seed if spec is not None else 0)

@@ -7,6 +7,7 @@ the most preferred verified point that meets the target and every constraint.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -58,6 +59,7 @@ def export(
     output: str | Path | None = None,
     storage: str | None = None,
     units: str = "mm-N-s",
+    plugins: Sequence[str] = (),
 ) -> ExportResult:
     """The verified optimum of ``study`` as a ``*PARAMETER`` block and a commented
     ``*MAT_SEATBELT_2D`` coating snippet.
@@ -74,6 +76,8 @@ def export(
         Optuna storage URL (default: the study's).
     units : {"mm-N-s", "mm-kg-ms", "m-kg-s"}
         Unit system of the target deck (MPa, GPa or Pa for the stresses).
+    plugins : sequence of str
+        Modules of effects the study's ``[model] effects`` name (checked, not used).
 
     Raises
     ------
@@ -88,7 +92,7 @@ def export(
     if units not in LSDYNA_UNITS:
         raise InputDataError(f"--units must be one of {', '.join(LSDYNA_UNITS)}, got {units!r}")
     spec = study if isinstance(study, StudySpec) else load_study(study)
-    check_effects(spec.effects)
+    check_effects(spec.effects, plugins)
     if output is not None and not Path(output).parent.exists():
         raise InputDataError(f"output folder {Path(output).parent} does not exist; create it first")
     url = storage or spec.default_storage()

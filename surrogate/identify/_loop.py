@@ -288,7 +288,7 @@ def _result(
             "f60_n": point.f60_n,
             "theta_sat_deg": point.theta_sat_deg,
         }
-    n_ok = sum(r.status == "ok" for r in verifier.records.values())
+    n_ok = sum(r.ok for r in verifier.records.values())
     if point is not None and n_ok >= 3:
         # refit on every verified run, the last candidates included
         model = fit_surrogate(verifier.sample_set(), seed=spec.seed)
@@ -387,9 +387,11 @@ def _message(
             f"{calls_to_verify} full-solver runs"
         )
     if point is None:
+        reasons = [r.reason for r in verifier.records.values() if r.reason]
         return (
-            f"budget exhausted after {verifier.calls} runs and no solver run succeeded; "
-            "check the rig and the parameter ranges"
+            f"budget exhausted after {verifier.calls} runs and no solver run succeeded"
+            + (f" (the last: {reasons[-1]})" if reasons else "")
+            + "; check the rig, the parameter ranges and the solver"
         )
     reach = _reach(verifier)
     why = ""
@@ -408,5 +410,5 @@ def _message(
 
 
 def _reach(verifier: Verifier) -> tuple[float, float] | None:
-    values = [r.f60_n for r in verifier.records.values() if r.status == "ok"]
+    values = [r.f60_n for r in verifier.records.values() if r.ok]
     return (min(values), max(values)) if values else None

@@ -8,7 +8,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from .._errors import InputDataError
-from ..effects import check_effects
 from ..study._spec import StudySpec
 
 __all__ = [
@@ -62,9 +61,9 @@ def meets_target(misfit: float, constraints: Mapping[str, float], tolerance: flo
 
 
 def refuse_model_effects(spec: StudySpec, command: str) -> None:
-    """The main job identifies the bare coating: a study with ``[model] effects`` is
-    refused in one line (an unknown name first, as every command refuses it)."""
-    if check_effects(spec.effects):
+    """The main job identifies the bare coating: a study with ``[model] effects`` (known,
+    a plug-in's or unknown) is refused in one line."""
+    if spec.effects:
         raise InputDataError(
             f"{spec.path}: {command} works on the bare coating (the main job) and "
             f"cannot use [model] effects = {list(spec.effects)} (their parameters are "

@@ -31,6 +31,7 @@ import pandas as pd
 from optuna.trial import FrozenTrial, TrialState
 
 from .._errors import InputDataError
+from ..solvers._base import result_settings
 from ..solvers._batch import solve_inputs, solver_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..storage._optuna import distributions, quiet_optuna
@@ -121,7 +122,7 @@ def plan_attributes(spec: StudySpec) -> dict[str, Any]:
         ],
         "parameters": spec.space.to_dict(),
         "solver": spec.solver,
-        "solver_settings": dict(sorted(spec.solver_settings.items())),
+        "solver_settings": result_settings(spec.solver, spec.solver_settings),
         "rig": spec.rig.to_dict(),
     }
 
@@ -151,18 +152,28 @@ def as_planned(spec: StudySpec, attrs: Mapping[str, Any]) -> StudySpec:
     """
     for key, section, mine in (
         ("solver", "solver", spec.solver),
-        ("solver_settings", "solver", dict(sorted(spec.solver_settings.items()))),
+        ("solver_settings", "solver", result_settings(spec.solver, spec.solver_settings)),
         ("rig", "rig", spec.rig.to_dict()),
         ("parameters", "parameters", spec.space.to_dict()),
     ):
         if key in attrs and attrs[key] != mine:
             raise InputDataError(
-                f"{spec.path}: its [{section}] differs from the plan in the storage; "
-                "start the worker with the planner's study file"
+                f"{spec.path}: its [{section}] differs from the plan in the storage"
+                f"{_difference(attrs[key], mine)}; start the worker with the planner's study file"
             )
     target = attrs.get("target_f60_n", spec.targets.f60_n)
     tolerance = attrs.get("tolerance", spec.targets.tolerance)
     return replace(spec, targets=Targets(target, tolerance))
+
+
+def _difference(planned: Any, mine: Any) -> str:
+    """`` (mesh: 'coarse' planned, 'fine' here)`` for the first key that differs, if a table."""
+    if not isinstance(planned, dict) or not isinstance(mine, dict):
+        return f" ({planned!r} planned, {mine!r} here)"
+    for key in sorted(set(planned) | set(mine)):
+        if planned.get(key) != mine.get(key):
+            return f" ({key}: {planned.get(key)!r} planned, {mine.get(key)!r} here)"
+    return ""
 
 
 # -- trials -----------------------------------------------------------------------------------
@@ -360,7 +371,7 @@ class Verifier:
             direction = 1.0 if point.params[name] * 1.05 <= spec.high else -1.0
             shifted = {**point.params, name: point.params[name] * np.exp(direction * step)}
             record = self.solve(shifted, phase="identifiability")
-            if record.status != "ok":
+            if not record.ok:
                 return None
             gradient[k] = direction * np.log(record.f60_n / point.f60_n) / step
         return gradient
@@ -379,7 +390,7 @@ class Verifier:
         return [
             r
             for r in self.records.values()
-            if r.status == "ok" and meets_target(r.misfit, r.constraints, tolerance)
+            if r.ok and meets_target(r.misfit, r.constraints, tolerance)
         ]
 
     def chosen(self) -> Verification | None:
@@ -391,14 +402,14 @@ class Verifier:
         return min(meeting, key=lambda r: tuple(r.params[name] for name in order))
 
     def best(self) -> Verification | None:
-        ok = [r for r in self.records.values() if r.status == "ok"]
+        ok = [r for r in self.records.values() if r.ok]
         if not ok:
             return None
         return min(ok, key=lambda r: (not is_feasible(r.constraints), r.misfit))
 
     def sample_set(self) -> SampleSet:
         """The verified runs as the surrogate's training set."""
-        rows = [r for r in self.records.values() if r.status == "ok"]
+        rows = [r for r in self.records.values() if r.ok]
         if len(rows) < 3:
             raise InputDataError(
                 f"only {len(rows)} solver runs succeeded; the surrogate needs "

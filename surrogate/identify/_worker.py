@@ -32,7 +32,7 @@ from optuna.trial import TrialState
 
 from .._errors import InputDataError
 from .._log import show_progress
-from .._pool import process_context
+from .._pool import check_jobs, one_blas_thread, process_context
 from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..storage._optuna import quiet_optuna, suggest
@@ -173,16 +173,15 @@ def work(
     idle_timeout_s : float
         Wait this long for new trials once the queue is empty and nothing runs.
     solve : callable
-        The full solver on :func:`surrogate.solvers._batch.solver_inputs` (tests pass a
-        cheap stand-in here; a study file cannot).
+        The full solver on :func:`surrogate.identify._verify.verification_inputs`
+        (tests pass a cheap stand-in here; a study file cannot).
     progress : bool
-        One line per finished run on stderr.
+        One line per finished run (logger ``surrogate``, stderr unless configured).
     """
     spec = study if isinstance(study, StudySpec) else load_study(study)
     refuse_model_effects(spec, "surrogate worker")
     check_workers(storage, jobs)
-    if jobs < 1:
-        raise InputDataError(f"--jobs must be ≥ 1 for a worker, got {jobs}")
+    check_jobs(jobs)
     if not isinstance(idle_timeout_s, int | float) or not idle_timeout_s >= 0:
         raise InputDataError(f"--idle-timeout must be ≥ 0 s, got {idle_timeout_s!r}")
     quiet_optuna()
@@ -209,8 +208,8 @@ def _work_in_processes(
     progress: bool,
 ) -> dict[str, Any]:
     """``jobs`` worker processes; SIGTERM to this one is passed on to them."""
-    # the package's one start method (surrogate._pool); this process closed its
-    # storage before, so no child inherits a database connection in use
+    # the package's one start method (surrogate._pool); a child lets go of the database
+    # connections it inherits (surrogate.storage) and opens its own storage
     context = process_context()
     results = context.SimpleQueue()
     processes = [
@@ -258,6 +257,7 @@ def _process_main(
     solve: Solve,
     progress: bool,
 ) -> None:
+    one_blas_thread()
     quiet_optuna()
     worker = _Worker(spec, storage, heartbeat_s=heartbeat_s, solve=solve, progress=progress)
     results.put(worker.loop(idle_timeout_s))
@@ -420,11 +420,11 @@ class _Worker:
 
     def _count(self, number: int, record: Verification) -> None:
         self.counts["runs"] += 1
-        self.counts["ok" if record.status == "ok" else "failed"] += 1
+        self.counts["ok" if record.ok else "failed"] += 1
         if self.progress:
             text = (
                 f"F60 {record.f60_n:.4g} N, misfit {100 * record.misfit:.2f} %"
-                if record.status == "ok"
+                if record.ok
                 else f"failed: {record.reason}"
             )
             logger.info("[%s] trial %d: %s", self.spec.name, number, text)

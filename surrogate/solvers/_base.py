@@ -42,7 +42,9 @@ __all__ = [
     "guarded",
     "ok_result",
     "register_solver",
+    "result_settings",
     "run_command",
+    "run_identity",
     "work_directory",
 ]
 
@@ -58,6 +60,15 @@ class Solver:
     name: ClassVar[str] = ""
     version: ClassVar[str] = ""
     settings_keys: ClassVar[tuple[str, ...]] = ()
+    #: settings that say how to run, not what: not part of a run's identity (its hash),
+    #: so the same run on another machine, checkout or timeout is the same run
+    run_settings: ClassVar[tuple[str, ...]] = (
+        "command",
+        "timeout_s",
+        "threads",
+        "keep_workdir",
+        "workdir_root",
+    )
 
     def solve(self, inputs: Mapping[str, Any]) -> dict[str, Any]:  # pragma: no cover
         """One run; ``inputs`` as made by :func:`surrogate.solvers.solver_inputs`.
@@ -87,6 +98,22 @@ class Solver:
 
 
 _REGISTRY: dict[str, type[Solver]] = {}
+
+
+def result_settings(kind: str, settings: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The settings of ``kind`` that can change a run's result (its ``run_settings`` left out)."""
+    run_only = _REGISTRY[kind].run_settings if kind in _REGISTRY else ()
+    return {k: v for k, v in sorted((settings or {}).items()) if k not in run_only}
+
+
+def run_identity(inputs: Mapping[str, Any]) -> dict[str, Any]:
+    """What names a run (what :func:`surrogate.solvers.input_hash` hashes): its inputs
+    with only the :func:`result_settings`; none at all when there are none."""
+    identity = {k: v for k, v in inputs.items() if k != "solver_settings"}
+    kept = result_settings(inputs.get("solver", "builtin"), inputs.get("solver_settings"))
+    if kept:
+        identity["solver_settings"] = kept
+    return identity
 
 
 def register_solver(cls: type[Solver]) -> type[Solver]:

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from .._io import atomic_write_text
+from ._base import run_identity
 
 __all__ = ["ResultCache", "canonical_json", "input_hash"]
 
@@ -25,8 +26,11 @@ def canonical_json(payload: Any) -> str:
 
 
 def input_hash(inputs: dict[str, Any]) -> str:
-    """SHA-256 (hex, 24 characters) of the canonical JSON of the solver inputs."""
-    return hashlib.sha256(canonical_json(inputs).encode("utf-8")).hexdigest()[:24]
+    """SHA-256 (hex, 24 characters) of the canonical JSON of a run's identity: the solver
+    inputs less the settings that only say how to run (program, timeout, threads, work
+    folders: :func:`surrogate.solvers._base.run_identity`)."""
+    identity = run_identity(inputs)
+    return hashlib.sha256(canonical_json(identity).encode("utf-8")).hexdigest()[:24]
 
 
 class ResultCache:

@@ -305,6 +305,8 @@ class LsDynaSolver(Solver):
         "workdir_root",
         "template_sha256",
     )
+    # the template's content is in template_sha256; its path says only where it is
+    run_settings: ClassVar[tuple[str, ...]] = (*Solver.run_settings, "template")
 
     @classmethod
     def check_settings(cls, settings: Mapping[str, Any]) -> dict[str, Any]:

@@ -35,7 +35,7 @@ def attach_run_report(
         return False
     figure = go.Figure()
     for record in sorted(records, key=lambda r: r.number or 0):
-        if record.status != "ok":
+        if not record.ok:
             continue
         chosen = record.number == chosen_number
         figure.add_trace(

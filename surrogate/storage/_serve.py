@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 from .._errors import InputDataError
@@ -15,11 +16,16 @@ HOST = "127.0.0.1"  # never 0.0.0.0: reach it from elsewhere through an SSH tunn
 
 
 def dashboard(
-    study: str | Path | StudySpec, *, storage: str | None = None, port: int = 8080
+    study: str | Path | StudySpec,
+    *,
+    storage: str | None = None,
+    port: int = 8080,
+    plugins: Sequence[str] = (),
 ) -> None:
-    """Serve optuna-dashboard for the study's storage until interrupted."""
+    """Serve optuna-dashboard for the study's storage until interrupted (``plugins``:
+    modules of effects the study's ``[model] effects`` name)."""
     spec = study if isinstance(study, StudySpec) else load_study(study)
-    check_effects(spec.effects)
+    check_effects(spec.effects, plugins)
     if not 1024 <= port <= 65535:
         raise InputDataError(f"--port must be in [1024, 65535], got {port}")
     url = storage or spec.default_storage()

@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import os
 import time
+import weakref
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -39,6 +41,7 @@ from optuna.storages.journal import JournalFileBackend
 from optuna.trial import FrozenTrial, TrialState
 
 from .._errors import InputDataError
+from .._pool import check_jobs
 
 __all__ = [
     "StorageError",
@@ -51,6 +54,37 @@ __all__ = [
 
 HEARTBEAT_ATTR = "surrogate:heartbeat"
 MAX_RETRY = 3  # a trial whose worker dies three times in a row is left FAIL
+
+
+_ENGINES: weakref.WeakSet[Any] = weakref.WeakSet()  # every database engine that connected
+
+
+def _track_engines() -> None:
+    """Remember each SQLAlchemy engine once it connects (Optuna's RDB storages)."""
+    from sqlalchemy import event
+    from sqlalchemy.engine import Engine
+
+    if not event.contains(Engine, "engine_connect", _remember_engine):
+        event.listen(Engine, "engine_connect", _remember_engine)
+
+
+def _remember_engine(connection: Any) -> None:
+    _ENGINES.add(connection.engine)
+
+
+def _forget_inherited_connections() -> None:
+    """In a forked child: let go of the parent's pooled database connections without
+    closing them, so the child never ends a connection the parent still uses
+    (SQLAlchemy, "Using Connection Pools with Multiprocessing or os.fork()"). A child
+    that needs a storage opens its own."""
+    for engine in list(_ENGINES):
+        with contextlib.suppress(Exception):  # one broken engine must not keep the others
+            engine.dispose(close=False)
+
+
+_track_engines()
+if hasattr(os, "register_at_fork"):  # POSIX; elsewhere no process is forked
+    os.register_at_fork(after_in_child=_forget_inherited_connections)
 
 
 class StorageError(InputDataError):
@@ -103,8 +137,7 @@ def storage_kind(url: str) -> str:
 
 def check_workers(url: str, workers: int) -> None:
     """Refuse more than one worker on SQLite (one line, with the fix)."""
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
-        raise InputDataError(f"--jobs must be a whole number ≥ 0, got {workers!r}")
+    check_jobs(workers, minimum=0)
     if workers > 1 and storage_kind(url) == "sqlite":
         raise InputDataError(
             f"--jobs {workers} on SQLite: SQLite hands the same queued trial to two workers; "

@@ -95,12 +95,12 @@ def _summary(trials) -> list[tuple[Any, ...]]:
 
 
 def test_workers_and_the_planner_solve_the_same_runs_with_the_study_settings(
-    tmp_path, scaled_solver, monkeypatch
+    tmp_path, scaled_solver, monkeypatch, storage_url
 ):
     sqlite = f"sqlite:///{tmp_path / 'alone' / 'scaled.db'}"
     alone, alone_trials, alone_log = _run(tmp_path / "alone", sqlite, 1, monkeypatch)
-    journal = f"journal://{tmp_path / 'workers' / 'study.log'}"
-    shared, shared_trials, shared_log = _run(tmp_path / "workers", journal, 2, monkeypatch)
+    # two local worker processes, forked by the planner (on PostgreSQL: it holds a pool)
+    shared, shared_trials, shared_log = _run(tmp_path / "workers", storage_url, 2, monkeypatch)
 
     assert alone.solver_calls == shared.solver_calls == len(alone_trials) >= 5
     assert _summary(shared_trials) == _summary(alone_trials)
