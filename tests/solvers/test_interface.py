@@ -92,3 +92,33 @@ def test_cli_simulate_rejects_a_bad_solver_option():
     )  # fmt: skip
     assert done.returncode == 2
     assert "expected KEY=VALUE" in done.stderr and done.stderr.count("\n") == 1
+
+
+def test_a_runs_identity_leaves_out_how_to_run_but_not_what():
+    def key(**settings):
+        return input_hash(solver_inputs(POINT, Rig(), solver="calculix", solver_settings=settings))
+
+    coarse = key(mesh="coarse")
+    # the program, its timeout, threads and work folders do not change the result
+    assert key(mesh="coarse", timeout_s=60, threads=2, workdir_root="/elsewhere") == coarse
+    assert key(mesh="coarse", command=["/opt/ccx/bin/ccx"], keep_workdir=True) == coarse
+    assert key(mesh="fine") != coarse  # the mesh does
+    assert input_hash(solver_inputs(POINT, Rig(), solver="calculix")) != coarse
+
+
+def test_the_same_study_in_another_folder_is_the_same_plan(tmp_path):
+    from surrogate.identify._verify import as_planned, plan_attributes
+
+    text = (Path(__file__).parents[2] / "studies" / "paper_coating_calculix.toml").read_text()
+    here, there = tmp_path / "a", tmp_path / "b"
+    for folder, timeout in ((here, 1800), (there, 60)):
+        folder.mkdir()
+        settings = f'timeout_s = {timeout}\nworkdir_root = "work"'  # resolved per folder
+        (folder / "s.toml").write_text(text.replace("timeout_s = 1800", settings))
+    planned, joining = load_study(here / "s.toml"), load_study(there / "s.toml")
+    assert planned.solver_settings["workdir_root"] != joining.solver_settings["workdir_root"]
+    as_planned(joining, plan_attributes(planned))  # accepted: the runs are the same
+    finer = load_study(there / "s.toml")
+    finer.solver_settings["mesh"] = "fine"
+    with pytest.raises(InputDataError, match=r"\[solver\] differs .*mesh: 'coarse' planned"):
+        as_planned(finer, plan_attributes(planned))
