@@ -134,11 +134,32 @@ class WorkerDispatcher:
                 len(keys),
                 self.storage,
             )
+        return self._wait(study, keys, phase)
+
+    def _wait(self, study: optuna.Study, keys: list[str], phase: str) -> dict[str, Verification]:
+        """Until every run of ``keys`` is over; says what it waits for every heartbeat."""
+        said = time.monotonic()
         while True:
             records = finished_records(study, keys)
             if len(records) == len(set(keys)):
                 return records
             stale_trial_check(study)
+            if self.progress and time.monotonic() - said >= self.heartbeat_s:
+                said = time.monotonic()
+                states = [
+                    t.state
+                    for t in study.get_trials(deepcopy=False)
+                    if t.user_attrs.get("input_hash") in set(keys) - set(records)
+                ]
+                logger.info(
+                    "[%s] %s: waiting for %d of %d runs (%d queued, %d running)",
+                    self.spec.name,
+                    phase,
+                    len(set(keys)) - len(records),
+                    len(set(keys)),
+                    states.count(TrialState.WAITING),
+                    states.count(TrialState.RUNNING),
+                )
             time.sleep(POLL_S)
 
 
@@ -308,7 +329,7 @@ class _Worker:
             engine.dispose()
 
     def loop(self, idle_timeout_s: float) -> dict[str, Any]:
-        """Work until the queue is empty, nothing runs, and ``idle_timeout_s`` passed."""
+        """Work until nothing has been queued or running for ``idle_timeout_s``."""
         main_thread = threading.current_thread() is threading.main_thread()
         previous = {sig: signal.signal(sig, self._on_signal) for sig in _SIGNALS if main_thread}
         try:
@@ -320,7 +341,10 @@ class _Worker:
                     if trial_id is not None:
                         self._run(trial_id)
                         idle_since = time.monotonic()
-                    elif self._running() or time.monotonic() - idle_since < idle_timeout_s:
+                    elif self._running():  # idle only once nothing is queued or running
+                        idle_since = time.monotonic()
+                        time.sleep(POLL_S)
+                    elif time.monotonic() - idle_since < idle_timeout_s:
                         time.sleep(POLL_S)
                     else:
                         break

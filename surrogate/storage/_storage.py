@@ -22,6 +22,7 @@ within the grace period).
 from __future__ import annotations
 
 import contextlib
+import datetime
 import errno
 import os
 import time
@@ -37,6 +38,7 @@ from optuna.storages import (
     RetryHeartbeatStaleTrialCallback,
 )
 from optuna.storages._heartbeat import BaseHeartbeat
+from optuna.storages._rdb import models as _rdb_models
 from optuna.storages.journal import JournalFileBackend
 from optuna.trial import FrozenTrial, TrialState
 
@@ -202,7 +204,7 @@ def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool =
                 callback=retry,
             )
         with _quiet_experimental():
-            return RDBStorage(
+            return _HeartbeatRDBStorage(
                 url,
                 heartbeat_interval=heartbeat_s,
                 grace_period=grace,
@@ -270,6 +272,44 @@ class _HeartbeatJournalStorage(JournalStorage, BaseHeartbeat):
         self,
     ) -> Callable[[optuna.Study, FrozenTrial], None] | None:
         return self._callback
+
+
+class _HeartbeatRDBStorage(RDBStorage):
+    """Optuna's RDB storage, whose stale check also fails a RUNNING trial that never
+    got a heartbeat once its start is older than the grace period.
+
+    A worker claims a trial (WAITING → RUNNING) and records its first heartbeat in two
+    transactions; killed between them, or losing its connection for the first beat,
+    it left a RUNNING trial that ``RDBStorage`` never judged stale (it skips trials
+    without heartbeats), so the plan waited forever. The journal storage judges such a
+    trial by its start already (:class:`_HeartbeatJournalStorage`). Machines sharing
+    the storage must agree on the time to within the grace period.
+    """
+
+    def _get_stale_trial_ids(self, study_id: int) -> list[int]:
+        stale = super()._get_stale_trial_ids(study_id)
+        if self.heartbeat_interval is None:
+            return stale
+        grace = self.grace_period or 2 * self.heartbeat_interval
+        now = datetime.datetime.now()  # the clock datetime_start was written with
+        session = self.scoped_session()
+        try:
+            never_beat = (
+                session.query(_rdb_models.TrialModel)
+                .filter(_rdb_models.TrialModel.study_id == study_id)
+                .filter(_rdb_models.TrialModel.state == TrialState.RUNNING)
+                .filter(~_rdb_models.TrialModel.heartbeats.any())
+                .all()
+            )
+            stale += [
+                int(trial.trial_id)
+                for trial in never_beat
+                if trial.datetime_start is not None
+                and (now - trial.datetime_start).total_seconds() > grace
+            ]
+        finally:
+            session.close()
+        return stale
 
 
 def storage_error_message(error: BaseException, url: str | None = None) -> str | None:

@@ -175,3 +175,103 @@ def test_a_solver_failure_is_a_fail_trial_with_its_reason_and_the_loop_goes_on(
     assert result.runs == len(keys) and result.failed == len(failed)
     assert all(t.state == TrialState.COMPLETE for t in trials if t.params["tcoat_mm"] <= 0.03)
     assert os.path.exists(tmp_path / ".solver-cache")
+
+
+def test_a_trial_claimed_without_a_first_heartbeat_is_failed_and_redone(
+    study_file, storage_url, tmp_path
+):
+    """The window between a claim and its first heartbeat (two transactions), made
+    deterministic: a worker 'dies' right after moving a trial to RUNNING."""
+    keys = _plan(study_file, storage_url, 2)
+    spec = load_study(study_file)
+    storage = open_storage(storage_url, heartbeat_s=1)
+    study = optuna.load_study(study_name=f"{spec.name}/verify", storage=storage)
+    claimed = study.get_trials(deepcopy=False, states=(TrialState.WAITING,))[0]
+    assert storage.set_trial_state_values(claimed._trial_id, state=TrialState.RUNNING)
+    time.sleep(3.5)  # past the grace period: three heartbeat intervals
+
+    log = tmp_path / "solver.log"
+    result = work(
+        study_file,
+        storage=storage_url,
+        heartbeat_s=1,
+        idle_timeout_s=0.0,
+        solve=FixedCostSolve(log, 0.0),
+        progress=False,
+    )
+
+    trials = _trials(study_file, storage_url)
+    assert not [t for t in trials if t.state in (TrialState.RUNNING, TrialState.WAITING)]
+    complete = [t for t in trials if t.state == TrialState.COMPLETE]
+    assert sorted(t.user_attrs["input_hash"] for t in complete) == sorted(keys)
+    failed = [t for t in trials if t.state == TrialState.FAIL]
+    assert [t.number for t in failed] == [claimed.number]
+    assert result.runs == 2 and result.solved == 2
+
+
+def test_the_idle_timeout_counts_from_when_nothing_is_queued_or_running(study_file, tmp_path):
+    """A worker waits out another worker's long run and then its idle timeout, so it
+    is still there when the planner queues the next batch after that run."""
+    import threading
+
+    storage_url = f"journal://{tmp_path / 'study.log'}"
+    _plan(study_file, storage_url, 1)
+    spec = load_study(study_file)
+    storage = open_storage(storage_url, heartbeat_s=1)
+    study = optuna.load_study(study_name=f"{spec.name}/verify", storage=storage)
+    other = study.get_trials(deepcopy=False, states=(TrialState.WAITING,))[0]
+    storage.set_trial_state_values(other._trial_id, state=TrialState.RUNNING)  # another worker's
+
+    log = tmp_path / "solver.log"
+    results = []
+    worker = threading.Thread(
+        target=lambda: results.append(
+            work(
+                spec,
+                storage=storage_url,
+                heartbeat_s=1,
+                idle_timeout_s=3.0,
+                solve=FixedCostSolve(log, 0.0),
+                progress=False,
+            )
+        )
+    )
+    worker.start()
+    for _ in range(10):  # the other run takes 5 s (its worker keeps the heartbeat)
+        storage.record_heartbeat(other._trial_id)
+        time.sleep(0.5)
+    storage.set_trial_state_values(other._trial_id, state=TrialState.COMPLETE, values=[0.0])
+    time.sleep(1.5)  # the planner looks at the results and queues its next point
+    points = make_design("lhs", spec.space, n=2, seed=11).to_dict("records")[1:]
+    (key,) = enqueue(
+        open_verify_study(spec, storage_url, heartbeat_s=None), spec, points, phase="b"
+    )
+    worker.join(timeout=30)
+
+    assert not worker.is_alive() and results and results[0].runs == 1
+    done = [t for t in _trials(study_file, storage_url) if t.user_attrs.get("input_hash") == key]
+    assert [t.state for t in done] == [TrialState.COMPLETE]
+
+
+def test_a_planner_that_waits_for_outside_workers_says_what_it_waits_for(
+    study_file, tmp_path, caplog
+):
+    import logging
+    import threading
+
+    from surrogate.identify._worker import WorkerDispatcher
+
+    storage_url = f"journal://{tmp_path / 'study.log'}"
+    spec = load_study(study_file)
+    study = open_verify_study(spec, storage_url, heartbeat_s=None)
+    points = make_design("lhs", spec.space, n=2, seed=5).to_dict("records")
+    dispatch = WorkerDispatcher(spec, storage_url, jobs=0, heartbeat_s=1, progress=True)
+    found = []
+    with caplog.at_level(logging.INFO, logger="surrogate"):
+        planner = threading.Thread(target=lambda: found.append(dispatch(study, points, "p")))
+        planner.start()
+        _wait_for(lambda: "waiting for 2 of 2 runs (2 queued, 0 running)" in caplog.text, 20)
+        work(spec, storage=storage_url, idle_timeout_s=0.0, solve=FixedCostSolve(tmp_path / "l", 0))
+        planner.join(timeout=20)
+    assert "2 runs queued" in caplog.text and "waiting for `surrogate worker`" in caplog.text
+    assert len(found) == 1 and all(r.ok for r in found[0].values())
