@@ -379,10 +379,11 @@ class Verifier:
     def _tell(
         self, params: dict[str, float], key: str, result: dict[str, Any], phase: str
     ) -> Verification:
-        self.study.enqueue_trial(params, skip_if_exists=False)
+        # queued with its hash and phase, as enqueue() queues a worker's trial
+        self.study.enqueue_trial(
+            params, user_attrs={"input_hash": key, "phase": phase}, skip_if_exists=False
+        )
         trial = self.study.ask(distributions(self.spec.space))
-        trial.set_user_attr("input_hash", key)
-        trial.set_user_attr("phase", phase)
         return tell_verification(self.study, trial, self.spec, params, result)
 
     def meeting(self) -> list[Verification]:

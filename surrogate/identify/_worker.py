@@ -138,25 +138,26 @@ class WorkerDispatcher:
 
     def _wait(self, study: optuna.Study, keys: list[str], phase: str) -> dict[str, Verification]:
         """Until every run of ``keys`` is over; says what it waits for every heartbeat."""
-        said = time.monotonic()
+        wanted, said = set(keys), time.monotonic()
         while True:
-            records = finished_records(study, keys)
-            if len(records) == len(set(keys)):
+            records = finished_records(study, wanted)
+            if len(records) == len(wanted):
                 return records
             stale_trial_check(study)
             if self.progress and time.monotonic() - said >= self.heartbeat_s:
                 said = time.monotonic()
+                open_keys = wanted - records.keys()
                 states = [
                     t.state
                     for t in study.get_trials(deepcopy=False)
-                    if t.user_attrs.get("input_hash") in set(keys) - set(records)
+                    if t.user_attrs.get("input_hash") in open_keys
                 ]
                 logger.info(
                     "[%s] %s: waiting for %d of %d runs (%d queued, %d running)",
                     self.spec.name,
                     phase,
-                    len(set(keys)) - len(records),
-                    len(set(keys)),
+                    len(open_keys),
+                    len(wanted),
                     states.count(TrialState.WAITING),
                     states.count(TrialState.RUNNING),
                 )
