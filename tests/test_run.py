@@ -55,31 +55,39 @@ def test_verified_point_resimulated_meets_target_and_constraints(study_file):
     assert any("note" in key for key in attrs)
 
 
-def test_interrupted_run_resumes_without_repeating(study_file, monkeypatch):
-    monkeypatch.setattr(verify_module, "solve_inputs", CountingSolve(stop_after=6))
-    with pytest.raises(KeyboardInterrupt):
-        run(study_file, progress=False)
-    storage = load_study(study_file).default_storage()
+def _finished_hashes(storage):
     study = optuna.load_study(study_name="paper-coating/verify", storage=storage)
-    done = {
+    return [
         t.user_attrs["input_hash"]
         for t in study.trials
         if t.state == optuna.trial.TrialState.COMPLETE
-    }
-    assert len(done) == 6
+    ]
+
+
+@pytest.mark.parametrize("stop_after", [6, 8])
+def test_interrupted_run_resumes_the_same_plan_without_repeating(
+    study_file, tmp_path, monkeypatch, stop_after
+):
+    """Interrupted after the initial design and one or three iterations, then run
+    again: the same runs in the same order as a run never interrupted, none twice."""
+    monkeypatch.setattr(verify_module, "solve_inputs", CountingSolve(stop_after=stop_after))
+    with pytest.raises(KeyboardInterrupt):
+        run(study_file, progress=False)
+    storage = load_study(study_file).default_storage()
+    assert len(set(_finished_hashes(storage))) == stop_after
     shutil.rmtree(study_file.parent / ".solver-cache")  # only the storage remembers now
     second = CountingSolve()
     monkeypatch.setattr(verify_module, "solve_inputs", second)
     result = run(study_file, progress=False)
     assert result.status == "verified"
-    assert second.calls == result.solver_calls - 6
-    study = optuna.load_study(study_name="paper-coating/verify", storage=storage)
-    hashes = [
-        t.user_attrs["input_hash"]
-        for t in study.trials
-        if t.state == optuna.trial.TrialState.COMPLETE
-    ]
+    assert second.calls == result.solver_calls - stop_after
+    hashes = _finished_hashes(storage)
     assert len(hashes) == len(set(hashes)) == result.solver_calls
+
+    (tmp_path / "once").mkdir()
+    once = run(shutil.copy(study_file, tmp_path / "once" / study_file.name), progress=False)
+    assert _finished_hashes(once.storage) == hashes
+    assert once.verified == result.verified and once.calls_to_verify == result.calls_to_verify
 
 
 def test_optuna_cli_lists_verify_trials_with_constraints(study_file):

@@ -9,8 +9,8 @@ One module for every rule of that study, used alike by the in-process verifier
   template …), so a worker and the planner agree on every run's identity;
 - :func:`open_verify_study` (created with its attributes when new) and
   :func:`as_planned` (a worker's study file must match the plan);
-- :func:`enqueue` (a point becomes a ``WAITING`` trial carrying its input hash
-  and phase), :func:`tell_verification` (a result finishes its trial),
+- :func:`enqueue` (a point becomes a ``WAITING`` trial carrying its input hash,
+  phase and plan), :func:`tell_verification` (a result finishes its trial),
   :func:`record_of` (a finished trial read back) and :func:`finished_records`.
 
 A trial holds the params, the relative F60 misfit as value, the constraint
@@ -48,6 +48,7 @@ __all__ = [
     "enqueue",
     "finished_records",
     "open_verify_study",
+    "plan_of",
     "record_of",
     "target_of",
     "tell_verification",
@@ -98,6 +99,15 @@ def target_of(spec: StudySpec) -> float:
     target = spec.targets.f60_n
     assert target is not None  # checked when the run starts
     return target
+
+
+def plan_of(spec: StudySpec) -> str:
+    """What makes the loop's decisions: its seed and its target.
+
+    A planner started again on the same storage with the same plan replays it
+    (:class:`Verifier`); runs of another plan are training data from the start.
+    """
+    return f"seed {spec.seed}, target F60 {target_of(spec):g} N ± {spec.targets.tolerance:g}"
 
 
 def verification_inputs(spec: StudySpec, params: Mapping[str, float]) -> dict[str, Any]:
@@ -194,10 +204,14 @@ def enqueue(
         params = {name: float(point[name]) for name in spec.space.names}
         key = input_hash(verification_inputs(spec, params))
         if key not in known:
-            study.enqueue_trial(params, user_attrs={"input_hash": key, "phase": phase})
+            study.enqueue_trial(params, user_attrs=_trial_attrs(spec, key, phase))
             known.add(key)
         keys.append(key)
     return keys
+
+
+def _trial_attrs(spec: StudySpec, key: str, phase: str) -> dict[str, str]:
+    return {"input_hash": key, "phase": phase, "plan": plan_of(spec)}
 
 
 def retry_pending(trial: FrozenTrial) -> bool:
@@ -300,6 +314,13 @@ class Verifier:
     ``dispatch`` (set by ``run --jobs N≠1``) verifies batches through the
     storage's workers instead of this process; both paths name a run by the
     hash of :func:`verification_inputs`, so no run is solved twice.
+
+    A planner started again (after Ctrl-C or SIGKILL) replays its plan
+    (:func:`plan_of`): the finished runs of each phase become known when the
+    loop reaches that phase, so every decision sees what it saw the first time
+    and proposes the same points; a phase's points queued by the earlier planner
+    stay in the phase even if the proposal differs. Runs of another plan (an
+    earlier seed or target) are known from the start.
     """
 
     def __init__(
@@ -317,13 +338,20 @@ class Verifier:
         self.cache = ResultCache(spec.directory / ".solver-cache")
         self.names = list(spec.space.names)
         self.records: dict[str, Verification] = {}
-        for trial in study.get_trials(
-            deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL)
-        ):
-            key = trial.user_attrs.get("input_hash")
+        self._replay: dict[str, Verification] = {}  # this plan's finished runs, not reached yet
+        self._queued: dict[str, list[dict[str, float]]] = {}  # this plan's points by phase
+        plan = plan_of(spec)
+        for trial in study.get_trials(deepcopy=False):
+            key, attrs = trial.user_attrs.get("input_hash"), trial.user_attrs
+            if key is None:
+                continue
+            if attrs.get("plan") == plan:  # queued (WAITING) trials hold the point apart
+                point = trial.params or trial.system_attrs.get("fixed_params", {})
+                self._queued.setdefault(attrs.get("phase", ""), []).append(dict(point))
             # a FAIL without a reason is an interrupted worker's run; its retry counts
-            if key is not None and (trial.values or "reason" in trial.user_attrs):
-                self.records[key] = record_of(trial)
+            if trial.state == TrialState.COMPLETE or "reason" in attrs:
+                known = self._replay if attrs.get("plan") == plan else self.records
+                known[key] = record_of(trial)
 
     @property
     def calls(self) -> int:
@@ -334,20 +362,44 @@ class Verifier:
 
     def verify(self, points: np.ndarray, *, phase: str) -> None:
         """Verify ``points`` in order while the budget lasts."""
-        batch = [dict(zip(self.names, map(float, p), strict=True)) for p in np.atleast_2d(points)]
+        batch = self._with_queued(
+            [dict(zip(self.names, map(float, p), strict=True)) for p in np.atleast_2d(points)],
+            phase,
+        )
         if self.dispatch is not None:
-            room = self.spec.budget.max_solver_calls - self.calls
-            self.records.update(self.dispatch(self.study, batch[: max(room, 0)], phase))
+            room = max(self.spec.budget.max_solver_calls - self.calls, 0)
+            found = self.dispatch(self.study, batch[:room], phase)
+            for params in batch[:room]:  # in the batch's order, whoever finished first
+                key = self._key(params)
+                if key in found:
+                    self._replay.pop(key, None)
+                    self.records.setdefault(key, found[key])
         for params in batch:
             if self.calls >= self.spec.budget.max_solver_calls:
                 break
             self.solve(params, phase=phase)
         self._report(phase)
 
+    def _with_queued(self, batch: list[dict[str, float]], phase: str) -> list[dict[str, float]]:
+        """``batch`` after the points an earlier planner queued for ``phase`` that
+        it lacks (none when the plan replays exactly, the usual case)."""
+        mine = {self._key(params) for params in batch}
+        earlier = {}
+        for params in self._queued.pop(phase, []):
+            key = self._key(params)
+            if key not in mine and key not in self.records:
+                earlier[key] = params
+        return [*earlier.values(), *batch]
+
+    def _key(self, params: Mapping[str, float]) -> str:
+        return input_hash(verification_inputs(self.spec, params))
+
     def solve(self, params: dict[str, float], *, phase: str) -> Verification:
         """One full-solver run as a trial; a finished run is never repeated."""
         inputs = verification_inputs(self.spec, params)
         key = input_hash(inputs)
+        if key not in self.records and key in self._replay:
+            self.records[key] = self._replay.pop(key)
         if key not in self.records and self.dispatch is not None:
             self.records.update(self.dispatch(self.study, [params], phase))
         if key not in self.records:
@@ -381,7 +433,7 @@ class Verifier:
     ) -> Verification:
         # queued with its hash and phase, as enqueue() queues a worker's trial
         self.study.enqueue_trial(
-            params, user_attrs={"input_hash": key, "phase": phase}, skip_if_exists=False
+            params, user_attrs=_trial_attrs(self.spec, key, phase), skip_if_exists=False
         )
         trial = self.study.ask(distributions(self.spec.space))
         return tell_verification(self.study, trial, self.spec, params, result)

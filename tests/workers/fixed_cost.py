@@ -5,7 +5,7 @@ study file. Each call appends ``start <hash> <pid>`` and ``done <hash> <pid>``
 to a log, so a test counts how often every run was started and finished.
 
 Run as a worker: ``python -m tests.workers.fixed_cost STUDY STORAGE LOG COST_S
-[JOBS] [HEARTBEAT_S]``.
+[JOBS] [HEARTBEAT_S] [--idle-timeout S] [--pause-at-first-heartbeat MARKER]``.
 """
 
 from __future__ import annotations
@@ -67,19 +67,53 @@ def events(log: str | Path) -> list[tuple[str, str, int]]:
     ]
 
 
+def pause_at_first_heartbeat(marker: str | Path) -> None:
+    """Make this process stop dead between its first claim and that trial's first
+    heartbeat: it writes ``marker`` (the trial id) and sleeps until killed.
+
+    The claim and the first heartbeat are two storage transactions; this makes
+    the window between them one a test can hit every time.
+    """
+    from surrogate.identify import _worker
+
+    start = _worker._Worker.__init__
+
+    def init(self: Any, *args: Any, **kwargs: Any) -> None:
+        start(self, *args, **kwargs)
+
+        def first_heartbeat(trial_id: int) -> None:
+            Path(marker).write_text(f"{trial_id} {os.getpid()}\n")
+            time.sleep(3600)
+
+        self.storage.record_heartbeat = first_heartbeat
+
+    _worker._Worker.__init__ = init
+
+
 def main(argv: list[str]) -> int:
+    import argparse
+
     from surrogate.identify._worker import work
 
-    study, storage, log, cost = argv[:4]
-    jobs = int(argv[4]) if len(argv) > 4 else 1
-    heartbeat = int(argv[5]) if len(argv) > 5 else 1
+    parser = argparse.ArgumentParser(prog="python -m tests.workers.fixed_cost")
+    parser.add_argument("study")
+    parser.add_argument("storage")
+    parser.add_argument("log")
+    parser.add_argument("cost_s", type=float)
+    parser.add_argument("jobs", type=int, nargs="?", default=1)
+    parser.add_argument("heartbeat_s", type=int, nargs="?", default=1)
+    parser.add_argument("--idle-timeout", type=float, default=0.0)
+    parser.add_argument("--pause-at-first-heartbeat", metavar="MARKER")
+    args = parser.parse_args(argv)
+    if args.pause_at_first_heartbeat:
+        pause_at_first_heartbeat(args.pause_at_first_heartbeat)
     result = work(
-        study,
-        storage=storage,
-        jobs=jobs,
-        heartbeat_s=heartbeat,
-        idle_timeout_s=0.0,
-        solve=FixedCostSolve(log, float(cost)),
+        args.study,
+        storage=args.storage,
+        jobs=args.jobs,
+        heartbeat_s=args.heartbeat_s,
+        idle_timeout_s=args.idle_timeout,
+        solve=FixedCostSolve(args.log, args.cost_s),
         progress=False,
     )
     return 143 if result.interrupted == "SIGTERM" else 0
