@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import statistics
 import sys
 import tempfile
@@ -45,6 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != ROOT / "benchmarks"]
 
 import surrogate  # noqa: E402
+from benchmarks._machine import machine  # noqa: E402
 from surrogate import Rig  # noqa: E402
 from surrogate.calibration._problem import coat_section  # noqa: E402
 from surrogate.calibration._synthetic import calibration_sets, write_calibration_study  # noqa: E402
@@ -167,31 +167,6 @@ def main() -> None:
     print(json.dumps(result, indent=1))
     if args.out:
         args.out.write_text(json.dumps({"rows": rows, "summary": result}, indent=1))
-
-
-def machine() -> str:
-    """The CPU, its count and the BLAS kernel: every absolute figure needs them."""
-    from threadpoolctl import threadpool_info
-
-    cpu = platform.machine()
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.exists():
-        names = [
-            ln.split(":", 1)[1].strip()
-            for ln in cpuinfo.read_text().splitlines()
-            if ln.startswith("model name")
-        ]
-        cpu = names[0] if names else cpu
-    blas = ", ".join(
-        sorted(
-            {
-                f"{i.get('internal_api')} {i.get('architecture', '')}".strip()
-                for i in threadpool_info()
-                if i.get("user_api") == "blas"
-            }
-        )
-    )
-    return f"{cpu}, {os.cpu_count()} CPUs, BLAS {blas or 'unknown'}"
 
 
 def _mark(value: bool | None) -> str:

@@ -22,6 +22,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != ROOT / "benchmarks"]
 
+from benchmarks._machine import machine  # noqa: E402
 from surrogate.identify._doe import make_design  # noqa: E402
 from surrogate.identify._verify import enqueue, finished_records, open_verify_study  # noqa: E402
 from surrogate.identify._worker import work  # noqa: E402
@@ -112,9 +113,16 @@ def main() -> None:
     print(
         f"{args.runs}-run plan, fixed solver cost {args.cost:g} s (serial solver time {ideal:g} s)"
     )
-    print(f"{'storage':<11} {'workers':>7} {'wall time':>10} {'efficiency':>11}")
+    header = f"{'storage':<11} {'workers':>7} {'wall time':>10} {'efficiency':>11}"
+    print(f"{header} {'overhead/run':>13}")
     for kind, n, seconds, efficiency in rows:
-        print(f"{kind:<11} {n:>7} {seconds:>9.2f}s {100 * efficiency:>10.0f}%")
+        # what a worker spends on a run besides the solver: claim, heartbeat, tell
+        overhead = n * seconds / args.runs - args.cost
+        print(
+            f"{kind:<11} {n:>7} {seconds:>9.2f}s {100 * efficiency:>10.0f}% "
+            f"{1000 * overhead:>10.0f} ms"
+        )
+    print(f"machine: {machine()}")
 
 
 if __name__ == "__main__":

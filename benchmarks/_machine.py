@@ -1,0 +1,33 @@
+"""The machine an absolute figure was measured on: CPU model, CPU count, BLAS kernel."""
+
+from __future__ import annotations
+
+import os
+import platform
+from pathlib import Path
+
+
+def machine() -> str:
+    """``AMD EPYC 7B13, 2 CPUs, BLAS openblas Haswell`` — every absolute figure needs it."""
+    import numpy  # noqa: F401  (loads the BLAS that threadpoolctl reports)
+    from threadpoolctl import threadpool_info
+
+    cpu = platform.machine()
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.exists():
+        names = [
+            line.split(":", 1)[1].strip()
+            for line in cpuinfo.read_text().splitlines()
+            if line.startswith("model name")
+        ]
+        cpu = names[0] if names else cpu
+    blas = ", ".join(
+        sorted(
+            {
+                f"{pool.get('internal_api')} {pool.get('architecture', '')}".strip()
+                for pool in threadpool_info()
+                if pool.get("user_api") == "blas"
+            }
+        )
+    )
+    return f"{cpu}, {os.cpu_count()} CPUs, BLAS {blas or 'unknown'}"
