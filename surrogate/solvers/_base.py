@@ -216,10 +216,18 @@ def run_command(
     timeout_s: float,
     env: Mapping[str, str] | None = None,
 ) -> subprocess.CompletedProcess[str]:
-    """Run ``args`` (no shell) in ``cwd``; a timeout or a missing program is a SolverError."""
+    """Run ``args`` (no shell) in ``cwd``; a timeout or a missing program is a SolverError.
+
+    The solver dies with its caller: a timeout, SIGTERM or Ctrl-C kills it here,
+    and on Linux a SIGKILLed caller takes it along too (``setpriv --pdeathsig``),
+    so a killed worker leaves no solver running for nobody.
+    """
+    program = _program(args[0], cwd, env)
+    if program is None:
+        raise SolverError(f"{args[0]}: command not found; install it or set its path")
     try:
         return subprocess.run(
-            list(args),
+            [*_DIE_WITH_PARENT, program, *args[1:]],
             cwd=cwd,
             env={**os.environ, **(env or {})},
             capture_output=True,
@@ -230,8 +238,22 @@ def run_command(
         )
     except subprocess.TimeoutExpired:
         raise SolverError(f"{args[0]} did not finish within {timeout_s:g} s (timeout_s)") from None
-    except FileNotFoundError:
-        raise SolverError(f"{args[0]}: command not found; install it or set its path") from None
+
+
+def _program(name: str, cwd: Path, env: Mapping[str, str] | None) -> str | None:
+    """The executable ``name`` runs: a path (relative to ``cwd``) or found on PATH."""
+    if os.sep in name:
+        path = Path(cwd, name)
+        return str(path) if path.is_file() and os.access(path, os.X_OK) else None
+    return shutil.which(name, path={**os.environ, **(env or {})}.get("PATH", os.defpath))
+
+
+def _die_with_parent() -> tuple[str, ...]:
+    setpriv = shutil.which("setpriv")  # util-linux, on every Debian
+    return (setpriv, "--pdeathsig", "KILL", "--") if setpriv else ()
+
+
+_DIE_WITH_PARENT = _die_with_parent()
 
 
 def guarded(solve: Callable[[], dict[str, Any]]) -> dict[str, Any]:
