@@ -108,6 +108,16 @@ def test_the_right_effect_recovers_its_parameter(tmp_path):
     assert result.params["tension.k_e"] == pytest.approx(0.006, rel=0.10)
     assert result.params["tension.k_s"] == pytest.approx(0.006, rel=0.10)
     assert result.study.endswith("/calibrate/tension")
+    # the hand-off: LS-DYNA's card has no tension, so the coat is named at 40 N
+    card = surrogate.export(path, effects=["tension"], at={"tension_n": 40.0})
+    p = result.params
+    assert card.source == "calibration" and card.not_carried == []
+    assert card.parameters["ECOAT"] == pytest.approx(
+        1e3 * p["ecoat_gpa"] * (1 + 40 * p["tension.k_e"])
+    )
+    assert card.parameters["SCOAT"] == pytest.approx(
+        1e3 * p["scoat_gpa"] * (1 + 40 * p["tension.k_s"])
+    )
 
 
 def test_cli_calibrate_json_then_compare(tmp_path, capsys):

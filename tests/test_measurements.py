@@ -89,3 +89,19 @@ def test_empty_and_garbage_files(tmp_path):
     for name in ("empty.csv", "header.csv", "absent.csv"):
         with pytest.raises(InputDataError):
             load_measurements(tmp_path / name)
+
+
+def test_a_test_at_a_longer_bending_length_brings_its_strip_length(tmp_path):
+    """The specimen length is a property of the test: a free_length_mm column."""
+    from surrogate import Rig
+    from surrogate.study import rig_for
+
+    with pytest.raises(InputDataError, match=r"got 35: set \[rig\] free_length_mm in the study"):
+        rig_for(Rig(), {"bending_length_mm": 20.0})
+    assert rig_for(Rig(), {"bending_length_mm": 20.0, "free_length_mm": 45.0}).free_length_mm == 45
+    table = _table()
+    table["bending_length_mm"] = 20.0
+    table["free_length_mm"] = 45.0
+    table.to_csv(tmp_path / "m.csv", index=False)
+    data = load_measurements(tmp_path / "m.csv")
+    assert "free_length_mm" in data.conditions and "free_length_mm" not in data.covariates

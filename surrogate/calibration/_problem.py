@@ -25,7 +25,7 @@ from ..effects import ModelState, check_effects, get_effect, load_plugin
 from ..physics import bending_stiffness, plastic_moment
 from ..solvers import model_state_of
 from ..solvers._batch import solver_inputs
-from ..study._conditions import CONDITIONS
+from ..study._conditions import CONDITIONS, RIG_CONDITIONS
 from ..study._measurements import MeasurementSet, load_measurements
 from ..study._space import ParameterSpace, ParameterSpec
 from ..study._spec import StudySpec, load_study
@@ -43,7 +43,6 @@ __all__ = [
     "state_features",
 ]
 
-RIG_CONDITIONS = ("tension_n", "bending_length_mm", "width_mm")
 MIN_BUDGET = 10  # full-solver runs: fewer cannot fit even the initial design
 
 

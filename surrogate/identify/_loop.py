@@ -10,6 +10,7 @@ in-memory Optuna study per iteration.
 from __future__ import annotations
 
 import dataclasses
+import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -104,6 +105,7 @@ def run(
         dispatch=None
         if jobs == 1
         else WorkerDispatcher(spec, storage_url, jobs=jobs, progress=progress),
+        replay=True,
     )
     iterations = _search_and_verify(spec, verifier)
     calls_to_verify = verifier.calls if verifier.chosen() is not None else None
@@ -313,6 +315,8 @@ def _result(
         iterations,
         message,
     )
+    # what `surrogate report` reads back: the result as the verify study's attribute
+    verifier.study.set_user_attr("result", json.loads(json.dumps(result.to_json())))
     attach_run_report(
         verifier.study,
         target_n=target_of(spec),

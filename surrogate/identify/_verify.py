@@ -315,12 +315,13 @@ class Verifier:
     storage's workers instead of this process; both paths name a run by the
     hash of :func:`verification_inputs`, so no run is solved twice.
 
-    A planner started again (after Ctrl-C or SIGKILL) replays its plan
-    (:func:`plan_of`): the finished runs of each phase become known when the
-    loop reaches that phase, so every decision sees what it saw the first time
+    With ``replay`` (the planner), a planner started again (after Ctrl-C or
+    SIGKILL) replays its plan (:func:`plan_of`): the finished runs of each phase
+    become known when the loop reaches that phase, so every decision sees what it saw the first time
     and proposes the same points; a phase's points queued by the earlier planner
     stay in the phase even if the proposal differs. Runs of another plan (an
-    earlier seed or target) are known from the start.
+    earlier seed or target) are known from the start; without ``replay`` (a
+    reader such as ``export``) every finished run is.
     """
 
     def __init__(
@@ -330,6 +331,7 @@ class Verifier:
         *,
         progress: bool,
         dispatch: Dispatch | None = None,
+        replay: bool = False,
     ) -> None:
         self.spec = spec
         self.study = study
@@ -350,7 +352,7 @@ class Verifier:
                 self._queued.setdefault(attrs.get("phase", ""), []).append(dict(point))
             # a FAIL without a reason is an interrupted worker's run; its retry counts
             if trial.state == TrialState.COMPLETE or "reason" in attrs:
-                known = self._replay if attrs.get("plan") == plan else self.records
+                known = self._replay if replay and attrs.get("plan") == plan else self.records
                 known[key] = record_of(trial)
 
     @property

@@ -1,8 +1,9 @@
 """Test conditions: what a measured test records about how it was run.
 
-``tension_n``, ``bending_length_mm`` and ``width_mm`` change the rig (the
-tension is the rig's dead end load, not an effect); ``direction`` (warp or
-weft) and ``rate_deg_s`` are read by effects. One place for their checks.
+``tension_n``, ``bending_length_mm``, ``free_length_mm`` (the test's strip
+length from the clamp) and ``width_mm`` change the rig (the tension is the rig's
+dead end load, not an effect); ``direction`` (warp or weft) and ``rate_deg_s``
+are read by effects. One place for their checks.
 """
 
 from __future__ import annotations
@@ -14,15 +15,19 @@ from .._errors import InputDataError
 from .._validate import check_positive, check_range
 from ._rig import Rig
 
-__all__ = ["CONDITIONS", "DIRECTIONS", "check_conditions", "rig_for"]
+__all__ = ["CONDITIONS", "DIRECTIONS", "RIG_CONDITIONS", "check_conditions", "rig_for"]
 
-CONDITIONS = ("tension_n", "direction", "rate_deg_s", "bending_length_mm", "width_mm")
+CONDITIONS = (
+    "tension_n",
+    "direction",
+    "rate_deg_s",
+    "bending_length_mm",
+    "free_length_mm",
+    "width_mm",
+)
 DIRECTIONS = ("warp", "weft")
-_RIG_FIELDS = {
-    "tension_n": "tension_n",
-    "bending_length_mm": "bending_length_mm",
-    "width_mm": "width_mm",
-}
+RIG_CONDITIONS = ("tension_n", "bending_length_mm", "free_length_mm", "width_mm")
+"""The conditions that are fields of the test's rig (the same names)."""
 
 
 def check_conditions(
@@ -57,5 +62,5 @@ def check_conditions(
 
 def rig_for(rig: Rig, conditions: Mapping[str, Any]) -> Rig:
     """The rig of one test: the study's rig with that test's conditions."""
-    changes = {field: conditions[name] for name, field in _RIG_FIELDS.items() if name in conditions}
+    changes = {name: conditions[name] for name in RIG_CONDITIONS if name in conditions}
     return rig.replace(**changes) if changes else rig

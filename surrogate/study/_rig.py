@@ -86,7 +86,9 @@ class Rig:
         if self.free_length_mm < needed:
             raise InputDataError(
                 f"free_length_mm must be ≥ 2 × bending_length_mm = {needed:g} mm so the strip "
-                f"stays on the probe up to 90°, got {self.free_length_mm:g}"
+                f"stays on the probe up to 90°, got {self.free_length_mm:g}: set [rig] "
+                f"free_length_mm in the study file (simulate: --free-length), or give each test "
+                f"its strip length in a free_length_mm column of the measurements"
             )
 
     @property

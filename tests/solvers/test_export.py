@@ -75,3 +75,95 @@ def test_bad_export_input_is_one_line_exit_2(tmp_path, capsys, args, message):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["coat.toml"]  # nothing written
+
+
+@pytest.mark.parametrize(
+    ("convention", "tcoat", "units"),
+    [
+        ("thickness", 0.012, "mm-N-s"),
+        ("bending-only", -0.012, "mm-N-s"),
+        ("ratio", -0.01, "mm-N-s"),  # 0.012 mm of a 1.2 mm webbing
+        ("bending-only", -1.2e-5, "m-kg-s"),
+        ("ratio", -0.01, "m-kg-s"),  # a ratio has no unit
+    ],
+)
+def test_tcoat_is_written_by_the_chosen_convention_and_the_snippet_says_which(
+    tmp_path, convention, tcoat, units
+):
+    path = _verified_study(tmp_path, surrogate.simulate(**OPTIMUM).f60_n)
+    result = surrogate.export(path, tcoat=convention, units=units)
+    assert result.parameters["TCOAT"] == pytest.approx(tcoat)
+    assert result.tcoat_mm == pytest.approx(0.012)  # the coat itself, in mm
+    assert result.parameters["ECOAT"] > 0  # a modulus in every convention
+    assert f"TCOAT convention '{convention}'" in result.text
+    card = result.text.splitlines()[-1]
+    assert float(card[2 * FIELD + FIELD : 2 * FIELD + 2 * FIELD]) == pytest.approx(tcoat, rel=1e-6)
+    assert surrogate.export(path).tcoat_convention == "thickness"  # the default
+
+
+def _calibration_record(tmp_path, params, *, effects):
+    """A calibration's record in the storage, as `surrogate calibrate` leaves it."""
+    import optuna
+
+    from surrogate.calibration._problem import model_label
+
+    path = tmp_path / "measured.toml"
+    (tmp_path / "m.csv").write_text("test_id,angle_deg,force_n\na,0,0\na,10,1\n")
+    path.write_text('[study]\nname = "measured"\n[measurements]\nfile = "m.csv"\nnoise_n = 0.05\n')
+    spec = load_study(path)
+    study = optuna.create_study(
+        study_name=f"measured/calibrate/{model_label(effects)}", storage=spec.default_storage()
+    )
+    study.set_user_attr(
+        "result",
+        {
+            "params": params,
+            "status": "converged",
+            "rmse_n": 0.051,
+            "noise_n": 0.05,
+            "misfit": "within the noise",
+        },
+    )
+    return path
+
+
+def test_a_calibrated_coat_is_evaluated_at_the_named_conditions(tmp_path, capsys):
+    params = {**OPTIMUM, "tension.k_e": 0.01, "tension.k_s": 0.005, "hardening.ratio": 0.05}
+    path = _calibration_record(tmp_path, params, effects=["tension", "hardening"])
+    result = surrogate.export(path, effects=["hardening", "tension"], at={"tension_n": 40.0})
+    assert result.source == "calibration" and result.status == "converged"
+    assert result.parameters["ECOAT"] == pytest.approx(1000.0 * 1.4)
+    assert result.parameters["SCOAT"] == pytest.approx(200.0 * 1.2)
+    assert result.parameters["TCOAT"] == pytest.approx(0.012)
+    assert result.not_carried == ["hardening (hardening_ratio)"]
+    assert "the card cannot carry: hardening (hardening_ratio)" in result.text
+    assert "evaluated at tension_n=40.0" in result.text
+    assert result.rmse_n == pytest.approx(0.051) and result.f60_n is None
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["export", str(path), "--effect", "tension", "--effect", "hardening"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "effect 'tension' reads the test condition tension_n" in err
+    assert "--at tension_n=VALUE" in err
+
+    assert (
+        main(
+            [
+                "export",
+                str(path),
+                "--effect",
+                "tension",
+                "--effect",
+                "hardening",
+                "--at",
+                "tension_n=0",
+                "--json",
+            ]
+        )
+        == 0
+    )
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["parameters"]["ECOAT"] == pytest.approx(1000.0)
+    assert payload["conditions"] == {"tension_n": 0.0}

@@ -53,7 +53,7 @@ def test_a_sigkilled_caller_takes_its_solver_along(tmp_path):
 def test_a_missing_program_or_a_timeout_is_a_solver_error(tmp_path):
     with pytest.raises(SolverError, match="no-such-solver: command not found"):
         run_command(["no-such-solver"], cwd=tmp_path, timeout_s=5)
-    with pytest.raises(SolverError, match="./missing: command not found"):
+    with pytest.raises(SolverError, match=r"\./missing: command not found"):
         run_command(["./missing"], cwd=tmp_path, timeout_s=5)
     with pytest.raises(SolverError, match=r"sleep did not finish within 0.2 s \(timeout_s\)"):
         run_command(["sleep", "5"], cwd=tmp_path, timeout_s=0.2)

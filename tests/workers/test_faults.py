@@ -28,7 +28,6 @@ import shutil
 import signal
 import subprocess
 import sys
-from pathlib import Path
 
 import optuna
 import pytest
@@ -56,8 +55,18 @@ def study_file(tmp_path):
 
 def _planner(study_file, storage_url):
     return subprocess.Popen(
-        [sys.executable, "-m", "surrogate", "run", str(study_file), "--storage", storage_url]
-        + ["--jobs", "0", "--json"],
+        [
+            sys.executable,
+            "-m",
+            "surrogate",
+            "run",
+            str(study_file),
+            "--storage",
+            storage_url,
+            "--jobs",
+            "0",
+            "--json",
+        ],
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -67,8 +76,20 @@ def _planner(study_file, storage_url):
 
 def _worker(study_file, storage_url, log, *options):
     return subprocess.Popen(
-        [sys.executable, "-m", "tests.workers.fixed_cost", str(study_file), storage_url]
-        + [str(log), str(COST_S), "1", str(HEARTBEAT_S), "--idle-timeout", "60", *options],
+        [
+            sys.executable,
+            "-m",
+            "tests.workers.fixed_cost",
+            str(study_file),
+            storage_url,
+            str(log),
+            str(COST_S),
+            "1",
+            str(HEARTBEAT_S),
+            "--idle-timeout",
+            "60",
+            *options,
+        ],
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -90,9 +111,7 @@ def _first_start_by(log, workers):
     return None
 
 
-def test_killed_workers_and_planner_repeat_no_run_and_lose_none(
-    study_file, storage_url, tmp_path
-):
+def test_killed_workers_and_planner_repeat_no_run_and_lose_none(study_file, storage_url, tmp_path):
     log = tmp_path / "solver.log"
     marker = tmp_path / "claimed"
     planner = _planner(study_file, storage_url)
