@@ -351,7 +351,7 @@ def _lsdyna_text(found: _Source, values: dict[str, float], units: str, tcoat: st
     tcoat_unit = "(a ratio)" if tcoat == "ratio" else f"in {length}"
     header = [
         "$ Coating of *MAT_SEATBELT_2D identified by surrogate",
-        *(f"$ {line}" for line in found.says),
+        *(line for text in found.says for line in _wrapped(text)),
         f"$ units {units}: ECOAT, SCOAT in {stress}, TCOAT {tcoat_unit}",
         *_wrapped(f"TCOAT convention '{tcoat}': {TCOAT_CONVENTIONS[tcoat]}."),
         "$ ECOAT is the coat's modulus itself (positive), in every convention.",
@@ -369,7 +369,12 @@ def _lsdyna_text(found: _Source, values: dict[str, float], units: str, tcoat: st
         "$" + "".join(v.rjust(FIELD) for v in ("", "", "&ECOAT", "&TCOAT", "&SCOAT"))[1:],
         "$"
         + "".join(
-            [" " * 2 * FIELD] + [format_real(values[name]) for name in ("ECOAT", "TCOAT", "SCOAT")]
+            # one blank at least between fields, so the line also reads as free format
+            [" " * 2 * FIELD]
+            + [
+                format_real(values[name], FIELD - 1).rjust(FIELD)
+                for name in ("ECOAT", "TCOAT", "SCOAT")
+            ]
         )[1:],
     ]
     return "\n".join([line for line in block if line != "*KEYWORD"] + snippet) + "\n"
@@ -387,4 +392,4 @@ def _not_carried_lines(effects: list[str]) -> list[str]:
 def _wrapped(text: str) -> list[str]:
     import textwrap
 
-    return [f"$ {line}" for line in textwrap.wrap(text, width=78)]
+    return [f"$ {line}" for line in textwrap.wrap(text, width=78, break_on_hyphens=False)]
