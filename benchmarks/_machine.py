@@ -1,4 +1,4 @@
-"""The machine an absolute figure was measured on: CPU model, CPU count, BLAS kernel."""
+"""The machine an absolute figure was measured on: CPU, CPU count, numpy's BLAS, numba."""
 
 from __future__ import annotations
 
@@ -8,8 +8,11 @@ from pathlib import Path
 
 
 def machine() -> str:
-    """``AMD EPYC 7B13, 2 CPUs, BLAS openblas Haswell`` — every absolute figure needs it."""
-    import numpy  # noqa: F401  (loads the BLAS that threadpoolctl reports)
+    """``AMD EPYC, 2 CPUs, numpy 2.4.6, BLAS openblas Haswell, numba 0.68.1`` — every
+    absolute figure needs it."""
+    from importlib.metadata import version
+
+    import numpy  # loads the BLAS that threadpoolctl reports
     from threadpoolctl import threadpool_info
 
     cpu = platform.machine()
@@ -30,4 +33,7 @@ def machine() -> str:
             }
         )
     )
-    return f"{cpu}, {os.cpu_count()} CPUs, BLAS {blas or 'unknown'}"
+    return (
+        f"{cpu}, {os.cpu_count()} CPUs, numpy {numpy.__version__}, BLAS {blas or 'unknown'}, "
+        f"numba {version('numba')}"
+    )

@@ -19,15 +19,29 @@ quadratic in ``z``) and for the fully plastic moment ``Mp`` (linear in ``z``);
 the short partially plastic transition between first yield and ``Mp`` is
 resolved fibre by fibre.  Each fibre is a 1-D elastic–plastic element with
 return mapping, so unloading is elastic from the stored plastic strain.
+
+The return mapping is compiled (numba, cached on disk): the rod solver calls
+it at every node of every Newton iterate, where numpy's per-call overhead on
+arrays of a few hundred entries would dominate.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
-__all__ = ["CoatingSection", "SectionState", "bending_stiffness", "plastic_moment"]
+__all__ = [
+    "CoatingSection",
+    "Fibres",
+    "SectionState",
+    "bending_stiffness",
+    "plastic_moment",
+    "return_mapping",
+]
 
 _DEFAULT_FIBRES = 6
 
@@ -49,6 +63,65 @@ class SectionState:
     """Plastic strain of every fibre at every material point."""
 
     eps_p: np.ndarray  # (n_points, n_fibres)
+
+
+class Fibres(NamedTuple):
+    """What :func:`return_mapping` reads of a :class:`CoatingSection`."""
+
+    E: float  # coat modulus [MPa]
+    S: float  # yield stress [MPa]
+    H: float  # kinematic hardening modulus [MPa]
+    D0: float  # extra elastic bending stiffness per unit width [N·mm]
+    z: np.ndarray  # (n_fibres,) heights of the top layer's fibres [mm]
+    moment_arm: np.ndarray  # (n_fibres,) 2·z·w [mm²]
+    tangent_arm: np.ndarray  # (n_fibres,) 2·z²·w [mm³]
+
+
+@njit(cache=True)
+def return_mapping(
+    kappa: float, eps_p: np.ndarray, fibres: Fibres, overstress: np.ndarray
+) -> tuple[float, float]:
+    """Moment and tangent per unit width at one point, by the fibres' return mapping.
+
+    ``eps_p`` (n_fibres,) are the point's plastic strains. Each fibre's relative stress
+    (trial stress minus the back stress ``H·eps_p``) is
+    ``q = E·(kappa·z − eps_p) − H·eps_p``; it yields where ``|q| > S``, by the
+    overstress ``q − clip(q, −S, S)`` (written to ``overstress``, shape
+    (n_fibres,)), which raises its plastic strain by ``overstress/(E + H)``.
+    Its stress is ``E·(kappa·z − eps_p_new)``, its tangent modulus ``E`` or,
+    yielding, ``E·H/(E + H)``; both integrate over both layers with the
+    Gauss–Legendre weights (``moment_arm = 2·z·w``, ``tangent_arm = 2·z²·w``).
+    """
+    E, S, H, D0, z, moment_arm, tangent_arm = fibres
+    plastic_modulus = E * H / (E + H)
+    moment = D0 * kappa
+    tangent = D0
+    for f in range(z.size):
+        relative = E * (kappa * z[f] - eps_p[f]) - H * eps_p[f]
+        excess = abs(relative) - S
+        if excess > 0.0:
+            overstress[f] = math.copysign(excess, relative)
+            stress = E * (kappa * z[f] - (eps_p[f] + overstress[f] / (E + H)))
+            tangent += plastic_modulus * tangent_arm[f]
+        else:
+            overstress[f] = 0.0
+            stress = E * (kappa * z[f] - eps_p[f])
+            tangent += E * tangent_arm[f]
+        moment += stress * moment_arm[f]
+    return moment, tangent
+
+
+@njit(cache=True)
+def _respond(
+    kappa: np.ndarray, eps_p: np.ndarray, fibres: Fibres
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`return_mapping` at every point: moments, tangents, overstresses."""
+    moment = np.empty(kappa.size)
+    tangent = np.empty(kappa.size)
+    overstress = np.empty(eps_p.shape)
+    for i in range(kappa.size):
+        moment[i], tangent[i] = return_mapping(kappa[i], eps_p[i], fibres, overstress[i])
+    return moment, tangent, overstress
 
 
 @dataclass(frozen=True)
@@ -75,15 +148,24 @@ class CoatingSection:
     hardening_modulus_mpa: float = 0.0
     extra_stiffness_nmm: float = 0.0
     n_fibres: int = _DEFAULT_FIBRES
-    _z: np.ndarray = field(init=False, repr=False, compare=False)
-    _w: np.ndarray = field(init=False, repr=False, compare=False)
+    _fibres: Fibres = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         xi, wi = np.polynomial.legendre.leggauss(self.n_fibres)
         z2 = self.thickness_mm / 2.0
         z1 = z2 - self.tcoat_mm
-        object.__setattr__(self, "_z", z1 + (xi + 1.0) * 0.5 * self.tcoat_mm)
-        object.__setattr__(self, "_w", wi * 0.5 * self.tcoat_mm)
+        z = z1 + (xi + 1.0) * 0.5 * self.tcoat_mm
+        w = wi * 0.5 * self.tcoat_mm
+        fibres = Fibres(
+            float(self.ecoat_mpa),
+            float(self.scoat_mpa),
+            float(self.hardening_modulus_mpa),
+            float(self.extra_stiffness_nmm),
+            z,
+            2.0 * z * w,
+            2.0 * z * z * w,
+        )
+        object.__setattr__(self, "_fibres", fibres)
 
     @property
     def stiffness_nmm(self) -> float:
@@ -95,6 +177,11 @@ class CoatingSection:
     def plastic_moment_nmm(self) -> float:
         """Fully plastic moment of the coat per unit width ``Mp`` [N·mm/mm] (exact)."""
         return plastic_moment(self.scoat_mpa, self.tcoat_mm, self.thickness_mm)
+
+    @property
+    def fibres(self) -> Fibres:
+        """What :func:`return_mapping` reads of this section."""
+        return self._fibres
 
     def initial_state(self, n_points: int) -> SectionState:
         """A virgin section at ``n_points`` material points."""
@@ -121,27 +208,21 @@ class CoatingSection:
         new_state : SectionState
             State after the return mapping, to be kept once the step converges.
         """
-        E, S, H = self.ecoat_mpa, self.scoat_mpa, self.hardening_modulus_mpa
-        strain = kappa[:, None] * self._z[None, :]
-        eps_p = state.eps_p
-        relative = E * (strain - eps_p) - H * eps_p  # trial stress minus back stress
-        excess = np.abs(relative) - S
-        plastic = excess > 0.0
-        d_eps_p = np.where(plastic, excess / (E + H), 0.0) * np.sign(relative)
-        eps_p_new = eps_p + d_eps_p
-        stress = E * (strain - eps_p_new)
-        modulus = np.where(plastic, E * H / (E + H), E)
-        zw = self._z * self._w
-        moment = 2.0 * stress @ zw + self.extra_stiffness_nmm * kappa
-        tangent = 2.0 * modulus @ (self._z * zw) + self.extra_stiffness_nmm
-        return moment, tangent, SectionState(eps_p_new)
+        kappa = np.ascontiguousarray(kappa, dtype=float)
+        moment, tangent, overstress = _respond(kappa, state.eps_p, self.fibres)
+        return moment, tangent, self.updated_state(state, overstress)
+
+    def updated_state(self, state: SectionState, overstress: np.ndarray) -> SectionState:
+        """The state after yielding by ``overstress`` (see :func:`return_mapping`):
+        ``eps_p + overstress/(E + H)``."""
+        return SectionState(
+            state.eps_p + overstress / (self.ecoat_mpa + self.hardening_modulus_mpa)
+        )
 
     def plastic_curvature(self, state: SectionState) -> np.ndarray:
         """Curvature left at zero moment after elastic unloading [1/mm].
 
         The stiffness-weighted mean of the fibres' plastic curvatures
-        ``eps_p / z``; zero for a virgin section.
+        ``eps_p / z``: ``2·E·∫ eps_p·z dz / D``; zero for a virgin section.
         """
-        coat_d = bending_stiffness(self.ecoat_mpa, self.tcoat_mm, self.thickness_mm)
-        moment_locked = 2.0 * self.ecoat_mpa * state.eps_p @ (self._z * self._w)
-        return moment_locked / (coat_d + self.extra_stiffness_nmm)
+        return state.eps_p @ self._fibres.moment_arm * (self.ecoat_mpa / self.stiffness_nmm)

@@ -9,6 +9,7 @@ above it.
 N          number of straight segments of the mid-line.
 h          (N,) segment lengths [mm]; the mid-line is inextensible.
 psi        (N,) segment angles [rad]; the unknowns.
+e, n       (N, 2) unit tangents ``(cos psi, sin psi)`` and normals ``(−sin psi, cos psi)``.
 r          (N+1, 2) node positions, ``r[0] = 0``, ``r[i+1] = r[i] + h[i]·e(psi[i])``.
 theta      clamp rotation [rad]; the clamp imposes the tangent ``theta`` at s = 0.
 kappa      (N,) curvature at nodes 0..N-1 (node 0 is the clamp edge, where the
@@ -16,14 +17,20 @@ kappa      (N,) curvature at nodes 0..N-1 (node 0 is the clamp edge, where the
 c          probe centre ``(l, rho)`` with ``rho`` the contact radius: the
            mid-line keeps the distance ``rho = probe_radius + t/2`` from ``c``.
 lam        normal contact force [N] (Lagrange multiplier of ``gap = 0``).
-J          (2, N) derivative of the contact point with respect to ``psi``.
+J          (2, reach) derivative of the contact point with respect to
+           ``psi[:reach]``, the angles that move it (``reach`` = k + 1 for a
+           contact inside segment k, v for a contact at node v); ``a_n, a_t``
+           its components along the contact normal and tangent.
 
 Each load step solves the KKT system of the incremental problem by Newton's
 method: bending moments from the section law, the dead tension at the free
 end, the self-weight (a dead load ``q`` per unit length along -z), frictional
 contact with the probe (regularised Coulomb law on the slip of the material
 point in contact), and the gap equation.  The Jacobian is exact (checked
-against finite differences in the tests).
+against finite differences in the tests).  It is tridiagonal but for the
+contact, which couples ``psi[:reach]`` and ``lam`` densely; Newton's linear
+system is solved by condensing the tridiagonal tail onto that head
+(:class:`_Jacobian`).
 
 Contact is an active set: under self-weight the strip sags away from the probe
 and touches it only after some rotation, and it may lift off again; a step
@@ -34,22 +41,35 @@ A compliant clamp (rotational spring ``k_c`` [N·mm/rad] between the fixture
 and the strip) is a zero-length first segment whose angle is the strip's
 tangent at the clamp edge: node 0 carries the spring moment
 ``k_c·(psi[0] − theta)`` instead of the section law.
+
+Speed: one curve is a few hundred iterates of about a hundred unknowns, where
+numpy's overhead per call, not arithmetic, would set the pace. The residual,
+the Jacobian and the linear solve of an iterate are therefore compiled loops
+(numba: ``_evaluate_kernel``, ``_newton_direction``; compiled at the first
+call, some seconds, and cached on disk next to this file); the load stepping,
+Newton's globalisation and the active set stay in Python. A kernel writes an
+iterate's node-wise quantities into the rows of one ``fields`` array and its
+scalars into ``info`` (the ``_ROW_*`` and ``_INFO_*`` indices);
+:class:`_Evaluation` reads them by name.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg
+from numba import njit
 
 from .._errors import SolverError
-from ._coating import CoatingSection, SectionState
+from ._coating import CoatingSection, Fibres, SectionState, return_mapping
 
 __all__ = ["RodSolution", "default_mesh", "solve_cantilever", "solve_rod", "uniform_mesh"]
 
-_HYSTERESIS = 0.05  # of a segment length, see _find_contact
+_HYSTERESIS = 0.05  # of a segment length, see _nearest_point
 _STICK_STIFFNESS_FACTOR = 1e5  # tangential penalty of sticking, in units of EI/l³
 _MAX_NEWTON = 40
 _MAX_BACKTRACKS = 6
@@ -58,6 +78,43 @@ _REFACTOR_EVERY = 25
 _STALL_ITERATIONS = 6
 _UNLOADING_FLOOR = 0.05  # of the elastic section stiffness, see _newton
 _MAX_BISECTIONS = 8
+_MOMENT_TOLERANCE = 1e-9  # of a moment residual scaled by D·b/l
+_GAP_TOLERANCE = 1e-10  # of the gap scaled by l
+
+# Rows of an iterate's ``fields`` array, shape (_N_ROWS, N+1); node-wise rows
+# use the first N entries, the lever rows the first ``reach``.
+_ROW_RESIDUAL = 0  # moments [N·mm] at nodes 0..N-1, then the gap row
+_ROW_KAPPA = 1  # curvature [1/mm]
+_ROW_MOMENT = 2  # moment, full width [N·mm]
+_ROW_STIFF = 3  # section tangent dM/dkappa / ell [N·mm]
+_ROW_COS = 4  # e_x of each segment
+_ROW_SIN = 5  # e_z
+_ROW_X = 6  # node positions [mm], N+1
+_ROW_Z = 7
+_ROW_NORMAL_J = 8  # a_n = normal·J [mm]
+_ROW_TANGENT_J = 9  # a_t = tangent·J [mm]
+_N_ROWS = 10
+
+# Entries of an iterate's ``info`` array: the contact and the convergence.
+_INFO_HAS_CONTACT = 0  # 1 with a probe (the nearest point exists), else 0
+_INFO_SEGMENT = 1  # contact segment k, or the first segment after the vertex
+_INFO_ON_VERTEX = 2
+_INFO_UPSTREAM = 3  # segments wholly between the clamp and the contact point
+_INFO_REACH = 4
+_INFO_U = 5  # position of the contact point along segment k [mm]
+_INFO_POINT_X = 6
+_INFO_POINT_Z = 7
+_INFO_DISTANCE = 8  # signed distance from the mid-line to the probe centre [mm]
+_INFO_NORMAL_X = 9  # unit vector from the contact point to the probe centre
+_INFO_NORMAL_Z = 10
+_INFO_FRICTION = 11  # friction force on the strip along the contact tangent [N]
+_INFO_STICKING = 12
+_INFO_SLIP_X = 13  # slip of the material point in contact since the last step [mm]
+_INFO_SLIP_Z = 14
+_INFO_MERIT = 15  # squared norm of the scaled residual (inf if not finite)
+_INFO_CONVERGED = 16  # every scaled residual entry is within its tolerance
+_INFO_GAP = 17  # distance from the probe surface [mm], < 0 penetrates
+_N_INFO = 18
 
 
 @dataclass(frozen=True)
@@ -106,7 +163,460 @@ def default_mesh(
     return np.asarray(lengths)
 
 
-@dataclass
+# ---------------------------------------------------------------- kernels
+
+
+class _Rod(NamedTuple):
+    """What the kernels read of a :class:`_Problem`, fixed during a run."""
+
+    h: np.ndarray  # (N,) segment lengths [mm]
+    ell: np.ndarray  # (N,) Voronoi lengths of the nodes [mm]
+    width: float  # [mm]
+    carried: np.ndarray  # (N,) weight moment arm of each segment [mm]
+    spring: float  # clamp stiffness [N·mm/rad] (if has_spring)
+    has_spring: bool
+    centre_x: float  # probe centre [mm]
+    centre_z: float
+    rho: float  # contact radius [mm]
+    has_probe: bool
+    mu: float  # Coulomb coefficient
+    stick_stiffness: float  # tangential penalty of sticking [N/mm]
+    moment_weight: float  # 1/(D·b/l): makes a moment residual dimensionless
+    gap_weight: float  # 1/l: makes the gap dimensionless
+
+
+class _Loads(NamedTuple):
+    """The loads of an iterate (ramped in by :func:`_sag` and the cantilever)."""
+
+    tension: float  # dead end load along +x [N]
+    line_load: float  # self-weight per length along −z [N/mm]
+    active: bool  # the contact is in the active set
+
+
+class _Reference(NamedTuple):
+    """What the kernels read of the last converged step."""
+
+    eps_p: np.ndarray  # (N, n_fibres) plastic strains
+    fields: np.ndarray  # its fields (nodes and tangents: the slip's reference)
+    friction: float  # its friction force [N]
+
+
+@njit(cache=True)
+def _bending(psi, theta, rod, fibres, eps_p, fields, overstress):
+    """Curvatures ``kappa_i = (psi_i − psi_{i−1})/ell_i`` (``psi_{−1} = theta``),
+    the moments and tangent stiffnesses of the section law (full width) into
+    ``fields``; node 0 carries the clamp spring instead when there is one."""
+    h, ell, width = rod.h, rod.ell, rod.width
+    kappa, moment, stiff = fields[_ROW_KAPPA], fields[_ROW_MOMENT], fields[_ROW_STIFF]
+    before = theta
+    for i in range(h.size):
+        kappa[i] = (psi[i] - before) / ell[i]
+        before = psi[i]
+    rotation = kappa[0]
+    if rod.has_spring:
+        kappa[0] = 0.0  # the spring node keeps an unused, unloaded section
+    for i in range(h.size):
+        m, c = return_mapping(kappa[i], eps_p[i], fibres, overstress[i])
+        moment[i] = m * width
+        stiff[i] = c * width / ell[i]
+    if rod.has_spring:
+        moment[0] = rod.spring * rotation
+        stiff[0] = rod.spring
+
+
+@njit(cache=True)
+def _geometry(psi, h, fields):
+    """Tangents ``e`` and nodes ``r[i+1] = r[i] + h_i·e_i`` into ``fields``."""
+    cos, sin, x, z = fields[_ROW_COS], fields[_ROW_SIN], fields[_ROW_X], fields[_ROW_Z]
+    x[0] = z[0] = 0.0
+    for i in range(h.size):
+        cos[i] = math.cos(psi[i])
+        sin[i] = math.sin(psi[i])
+        x[i + 1] = x[i] + h[i] * cos[i]
+        z[i + 1] = z[i] + h[i] * sin[i]
+
+
+@njit(cache=True)
+def _load_residual(loads, rod, fields):
+    """Residual rows without the contact: ``M_i − M_{i+1}`` plus the moments of the
+    end load ``T·h_i·sin psi_i`` and of the weight carried downstream
+    ``q·h_i·carried_i·cos psi_i``."""
+    tension, line_load = loads.tension, loads.line_load
+    h, carried = rod.h, rod.carried
+    moment, residual = fields[_ROW_MOMENT], fields[_ROW_RESIDUAL]
+    n = h.size
+    for i in range(n):
+        residual[i] = moment[i] - moment[i + 1] if i + 1 < n else moment[i]
+        if tension:
+            residual[i] += tension * h[i] * fields[_ROW_SIN, i]
+        if line_load:
+            residual[i] += line_load * h[i] * carried[i] * fields[_ROW_COS, i]
+
+
+@njit(cache=True)
+def _segment_distance(i, centre_x, centre_z, h, fields):
+    """Projection of the centre onto segment ``i`` (unclipped) and the distance
+    from the centre to the segment's nearest point."""
+    cos, sin = fields[_ROW_COS, i], fields[_ROW_SIN, i]
+    rel_x, rel_z = centre_x - fields[_ROW_X, i], centre_z - fields[_ROW_Z, i]
+    along = cos * rel_x + sin * rel_z
+    u = min(max(along, 0.0), h[i])
+    dx = centre_x - (fields[_ROW_X, i] + u * cos)
+    dz = centre_z - (fields[_ROW_Z, i] + u * sin)
+    return along, math.sqrt(dx * dx + dz * dz)
+
+
+@njit(cache=True)
+def _nearest_point(rod, preferred, fields, info):
+    """The point of the mid-line nearest to the probe centre, over all segments,
+    into ``info``; its levers ``a_n, a_t`` into ``fields``.
+
+    Where the strip is concave towards the probe, the probe centre projects
+    onto two neighbouring segments and the nearer one flips between Newton
+    iterates; the ``preferred`` segment (−1: none) is kept until the
+    projection leaves it (the other segment's overlap is ~rho·kink²).
+    """
+    h, centre_x, centre_z = rod.h, rod.centre_x, rod.centre_z
+    n = h.size
+    k, best = 0, math.inf
+    for i in range(n):
+        _, distance = _segment_distance(i, centre_x, centre_z, h, fields)
+        if distance < best:
+            k, best = i, distance
+    if preferred >= 0:
+        along, distance = _segment_distance(preferred, centre_x, centre_z, h, fields)
+        if 0.0 < along < h[preferred] and distance - best < _HYSTERESIS * h[preferred]:
+            k = preferred
+    along, _ = _segment_distance(k, centre_x, centre_z, h, fields)
+    cos, sin = fields[_ROW_COS], fields[_ROW_SIN]
+    if 0.0 < along < h[k]:
+        # Segment case: the normal is the segment's; the signed distance stays
+        # meaningful for a Newton iterate that over-shoots the probe centre.
+        normal_x, normal_z = -sin[k], cos[k]
+        point_x = fields[_ROW_X, k] + along * cos[k]
+        point_z = fields[_ROW_Z, k] + along * sin[k]
+        distance = normal_x * (centre_x - fields[_ROW_X, k]) + normal_z * (
+            centre_z - fields[_ROW_Z, k]
+        )
+        segment, upstream, reach, u, on_vertex = k, k, k + 1, along, 0.0
+    else:
+        v = k + 1 if along >= h[k] else k  # the vertex is node v
+        point_x, point_z = fields[_ROW_X, v], fields[_ROW_Z, v]
+        diff_x, diff_z = centre_x - point_x, centre_z - point_z
+        distance = math.hypot(diff_x, diff_z)
+        normal_x, normal_z = diff_x / distance, diff_z / distance
+        segment, upstream, reach, u, on_vertex = min(v, n - 1), v, v, 0.0, 1.0
+    # J_j = h_j·n_j upstream, u·n_k on the contact segment; the tangent is the
+    # normal turned by −90°, along the strip away from the clamp.
+    tangent_x, tangent_z = normal_z, -normal_x
+    for j in range(reach):
+        lever = h[j] if j < upstream else u
+        jac_x, jac_z = -lever * sin[j], lever * cos[j]
+        fields[_ROW_NORMAL_J, j] = normal_x * jac_x + normal_z * jac_z
+        fields[_ROW_TANGENT_J, j] = tangent_x * jac_x + tangent_z * jac_z
+    info[_INFO_HAS_CONTACT] = 1.0
+    info[_INFO_SEGMENT] = segment
+    info[_INFO_ON_VERTEX] = on_vertex
+    info[_INFO_UPSTREAM] = upstream
+    info[_INFO_REACH] = reach
+    info[_INFO_U] = u
+    info[_INFO_POINT_X] = point_x
+    info[_INFO_POINT_Z] = point_z
+    info[_INFO_DISTANCE] = distance
+    info[_INFO_NORMAL_X] = normal_x
+    info[_INFO_NORMAL_Z] = normal_z
+
+
+@njit(cache=True)
+def _friction(lam, rod, previous, info):
+    """Coulomb's law by return mapping on the slip of the material point in
+    contact since the last step: stick elastically, else slide; into ``info``."""
+    before_fields = previous.fields
+    upstream, u = int(info[_INFO_UPSTREAM]), info[_INFO_U]
+    if info[_INFO_ON_VERTEX]:
+        before_x, before_z = before_fields[_ROW_X, upstream], before_fields[_ROW_Z, upstream]
+    else:
+        k = int(info[_INFO_SEGMENT])
+        before_x = before_fields[_ROW_X, k] + u * before_fields[_ROW_COS, k]
+        before_z = before_fields[_ROW_Z, k] + u * before_fields[_ROW_SIN, k]
+    slip_x, slip_z = info[_INFO_POINT_X] - before_x, info[_INFO_POINT_Z] - before_z
+    slip = info[_INFO_NORMAL_Z] * slip_x - info[_INFO_NORMAL_X] * slip_z  # along the tangent
+    trial = previous.friction - rod.stick_stiffness * slip
+    limit = rod.mu * max(lam, 0.0)
+    sticking = abs(trial) <= limit
+    info[_INFO_FRICTION] = trial if sticking else math.copysign(limit, trial)
+    info[_INFO_STICKING] = 1.0 if sticking else 0.0
+    info[_INFO_SLIP_X] = slip_x
+    info[_INFO_SLIP_Z] = slip_z
+
+
+@njit(cache=True)
+def _measure(rod, residual, info):
+    """Merit (squared norm of the residual scaled by ``moment_weight`` and
+    ``gap_weight``) and convergence (each scaled entry within its tolerance)."""
+    moment_weight, gap_weight = rod.moment_weight, rod.gap_weight
+    n = residual.size - 1
+    merit, converged = 0.0, True
+    for i in range(n + 1):
+        scaled = residual[i] * (moment_weight if i < n else gap_weight)
+        merit += scaled * scaled
+        converged = converged and abs(scaled) < (_MOMENT_TOLERANCE if i < n else _GAP_TOLERANCE)
+    if not math.isfinite(merit):
+        merit, converged = math.inf, False
+    info[_INFO_MERIT] = merit
+    info[_INFO_CONVERGED] = 1.0 if converged else 0.0
+
+
+# Where each record ends among a kernel's flat arguments (see _unpack).
+_LOADS_END = len(_Loads._fields)
+_ROD_END = _LOADS_END + len(_Rod._fields)
+_FIBRES_END = _ROD_END + len(Fibres._fields)
+
+
+@njit(cache=True)
+def _unpack(flat):
+    """The :class:`_Loads` and :class:`_Rod` that lead a kernel's ``*flat``
+    arguments (the evaluation's go on with a :class:`~._coating.Fibres` and a
+    :class:`_Reference`). Kernels take these records field by field: numba
+    type-checks plain arguments several times faster than tuples at each call."""
+    return _Loads(*flat[:_LOADS_END]), _Rod(*flat[_LOADS_END:_ROD_END])
+
+
+@njit(cache=True)
+def _evaluate_kernel(psi, lam, theta, preferred, *flat):
+    """Residual of equilibrium and of the gap at ``(psi, lam)``: ``fields``,
+    ``info`` and the fibres' overstress (see the module's notes)."""
+    loads, rod = _unpack(flat)
+    fibres, previous = Fibres(*flat[_ROD_END:_FIBRES_END]), _Reference(*flat[_FIBRES_END:])
+    n = psi.size
+    fields = np.zeros((_N_ROWS, n + 1))
+    info = np.zeros(_N_INFO)
+    overstress = np.empty(previous.eps_p.shape)
+    _bending(psi, theta, rod, fibres, previous.eps_p, fields, overstress)
+    _geometry(psi, rod.h, fields)
+    _load_residual(loads, rod, fields)
+    residual = fields[_ROW_RESIDUAL]
+    if rod.has_probe:
+        _nearest_point(rod, preferred, fields, info)
+        info[_INFO_GAP] = info[_INFO_DISTANCE] - rod.rho
+    if rod.has_probe and loads.active:
+        reach = int(info[_INFO_REACH])
+        for j in range(reach):
+            residual[j] += lam * fields[_ROW_NORMAL_J, j]
+        if rod.mu:
+            _friction(lam, rod, previous, info)
+            for j in range(reach):
+                residual[j] -= info[_INFO_FRICTION] * fields[_ROW_TANGENT_J, j]
+        residual[n] = info[_INFO_GAP]
+    else:
+        residual[n] = lam  # no probe, or the strip is off it: no contact force
+    _measure(rod, residual, info)
+    return fields, info, overstress
+
+
+@njit(cache=True)
+def _jacobian_kernel(fields, info, lam, stiff, *flat):
+    """The exact Jacobian at an iterate, as :class:`_Jacobian`'s parts.
+
+    ``stiff`` replaces the section tangents (see :func:`_newton`). The
+    tridiagonal part: ``dR_i/dpsi`` from the moments (``stiff``), the end load
+    ``T·h·cos psi`` and the weight ``−q·h·carried·sin psi``. The contact rows
+    ``lam·a_n − f·a_t``: the segments upstream of the contact point turn
+    (diagonal ``w = lam·a_t + f·a_n``), the normal turns with its angle
+    ``beta`` (``−w ⊗ dbeta``, with ``dbeta = e_k`` inside segment k and
+    ``a_t/distance`` at a vertex), the contact segment's lever ``u`` changes
+    (segment case), the friction of a sticking point follows the slip
+    (``k_s·a_t ⊗ (a_t + dbeta·normal·slip)``), a sliding one ``lam``
+    (``−mu·sign(f)·a_t``); the gap row is ``−a_n``.
+    """
+    loads, rod = _unpack(flat)
+    tension, line_load = loads.tension, loads.line_load
+    h, carried = rod.h, rod.carried
+    n = stiff.size
+    diag = np.empty(n)
+    for i in range(n):
+        diag[i] = stiff[i] + stiff[i + 1] if i + 1 < n else stiff[i]
+        if tension:
+            diag[i] += tension * h[i] * fields[_ROW_COS, i]
+        if line_load:
+            diag[i] -= line_load * h[i] * carried[i] * fields[_ROW_SIN, i]
+    contact = rod.has_probe and loads.active
+    m = int(info[_INFO_REACH]) if contact else 0
+    head = np.zeros((m + 1, m + 1))
+    for i in range(m):
+        head[i, i] = diag[i]
+        if i + 1 < m:
+            head[i, i + 1] = head[i + 1, i] = -stiff[i + 1]
+    if contact:
+        _contact_jacobian(head, fields, info, lam, rod.mu, rod.stick_stiffness)
+    else:
+        head[m, m] = 1.0  # no contact force: the last row is lam = 0
+    coupling = -stiff[m] if 0 < m < n else 0.0
+    return head, diag[m:].copy(), -stiff[m + 1 :], coupling
+
+
+@njit(cache=True)
+def _contact_jacobian(head, fields, info, lam, mu, stick_stiffness):
+    """Add the contact's terms (see :func:`_jacobian_kernel`) to ``head``."""
+    m = head.shape[0] - 1
+    normal_j, tangent_j = fields[_ROW_NORMAL_J, :m], fields[_ROW_TANGENT_J, :m]
+    friction, sticking = info[_INFO_FRICTION], info[_INFO_STICKING] != 0.0
+    distance, upstream = info[_INFO_DISTANCE], int(info[_INFO_UPSTREAM])
+    slip_normal = (
+        info[_INFO_NORMAL_X] * info[_INFO_SLIP_X] + info[_INFO_NORMAL_Z] * info[_INFO_SLIP_Z]
+    )
+    w = lam * tangent_j + friction * normal_j
+    for j in range(upstream):
+        head[j, j] += w[j]
+    if info[_INFO_ON_VERTEX]:
+        dbeta = tangent_j / distance
+        for i in range(m):
+            for j in range(m):
+                head[i, j] -= w[i] * dbeta[j]
+                if sticking:
+                    head[i, j] += (
+                        stick_stiffness * tangent_j[i] * (tangent_j[j] + slip_normal * dbeta[j])
+                    )
+    else:
+        k = m - 1
+        for i in range(m):
+            head[i, k] -= w[i]
+            head[k, i] -= lam * tangent_j[i]
+            if sticking:
+                for j in range(m):
+                    head[i, j] += stick_stiffness * tangent_j[i] * tangent_j[j]
+                head[i, k] += stick_stiffness * slip_normal * tangent_j[i]
+        head[k, k] += lam * distance + friction * info[_INFO_U]
+    for i in range(m):
+        head[i, m] = normal_j[i]
+        head[m, i] = -normal_j[i]
+        if mu and not sticking and lam > 0.0:
+            head[i, m] -= mu * np.sign(friction) * tangent_j[i]
+
+
+@njit(cache=True)
+def _tridiagonal_solve(off, diag, rhs):
+    """Solve a symmetric tridiagonal system in place of ``rhs`` (n, n_rhs): Gaussian
+    elimination with partial pivoting (LAPACK's ``gtsv``); False if singular."""
+    n, n_rhs = rhs.shape
+    d, lower, upper = diag.copy(), off.copy(), off.copy()
+    upper2 = np.zeros(max(n - 2, 0))  # fill-in of row interchanges
+    for i in range(n - 1):
+        if abs(d[i]) >= abs(lower[i]):
+            if d[i] == 0.0:
+                return False
+            factor = lower[i] / d[i]
+            d[i + 1] -= factor * upper[i]
+            for c in range(n_rhs):
+                rhs[i + 1, c] -= factor * rhs[i, c]
+        else:  # interchange rows i and i+1
+            factor = d[i] / lower[i]
+            d[i], below = lower[i], d[i + 1]
+            d[i + 1] = upper[i] - factor * below
+            if i < n - 2:
+                upper2[i] = upper[i + 1]
+                upper[i + 1] = -factor * upper2[i]
+            upper[i] = below
+            for c in range(n_rhs):
+                rhs[i, c], rhs[i + 1, c] = rhs[i + 1, c], rhs[i, c] - factor * rhs[i + 1, c]
+    if d[n - 1] == 0.0:
+        return False
+    for i in range(n - 1, -1, -1):
+        for c in range(n_rhs):
+            if i + 1 < n:
+                rhs[i, c] -= upper[i] * rhs[i + 1, c]
+            if i + 2 < n:
+                rhs[i, c] -= upper2[i] * rhs[i + 2, c]
+            rhs[i, c] /= d[i]
+    return True
+
+
+@njit(cache=True)
+def _dense_solve(matrix, rhs):
+    """Solve ``matrix·x = rhs`` in place of both by LU with partial pivoting;
+    False if singular."""
+    n = rhs.size
+    for c in range(n):
+        pivot = c
+        for r in range(c + 1, n):
+            if abs(matrix[r, c]) > abs(matrix[pivot, c]):
+                pivot = r
+        if matrix[pivot, c] == 0.0:
+            return False
+        if pivot != c:
+            for j in range(c, n):
+                matrix[c, j], matrix[pivot, j] = matrix[pivot, j], matrix[c, j]
+            rhs[c], rhs[pivot] = rhs[pivot], rhs[c]
+        for r in range(c + 1, n):
+            factor = matrix[r, c] / matrix[c, c]
+            if factor != 0.0:
+                for j in range(c + 1, n):
+                    matrix[r, j] -= factor * matrix[c, j]
+                rhs[r] -= factor * rhs[c]
+    for r in range(n - 1, -1, -1):
+        for j in range(r + 1, n):
+            rhs[r] -= matrix[r, j] * rhs[j]
+        rhs[r] /= matrix[r, r]
+    return True
+
+
+@njit(cache=True)
+def _condensed_solve(head, tail_diagonal, tail_off, coupling, rhs):
+    """``J⁻¹·rhs`` from :class:`_Jacobian`'s parts; ``(x, False)`` if ``J`` is singular.
+
+    Static condensation of the tail: solve ``T·[y, z] = [rhs_tail, e_0]``,
+    which leaves the head with ``J[m−1, m−1] − c²·z_0`` and
+    ``rhs[m−1] − c·y_0``; solve it, then ``x_tail = y − c·x[m−1]·z``.
+    """
+    m, n = head.shape[0] - 1, rhs.size - 1
+    x = np.empty(n + 1)
+    reduced = head.copy()
+    head_x = np.empty(m + 1)
+    head_x[:m] = rhs[:m]
+    head_x[m] = rhs[n]
+    tail = np.zeros((n - m, 2))
+    if n > m:
+        tail[:, 0] = rhs[m:n]
+        tail[0, 1] = 1.0
+        if not _tridiagonal_solve(tail_off, tail_diagonal, tail):
+            return x, False
+        if m:
+            reduced[m - 1, m - 1] -= coupling * coupling * tail[0, 1]
+            head_x[m - 1] -= coupling * tail[0, 0]
+    if not _dense_solve(reduced, head_x):
+        return x, False
+    x[:m] = head_x[:m]
+    x[n] = head_x[m]
+    for i in range(n - m):
+        x[m + i] = tail[i, 0] - (coupling * head_x[m - 1] * tail[i, 1] if m else 0.0)
+    return x, True
+
+
+@njit(cache=True)
+def _newton_direction(fields, info, lam, stiff, *flat):
+    """Newton's step ``−J⁻¹·residual`` and whether ``J`` was regular."""
+    head, tail_diagonal, tail_off, coupling = _jacobian_kernel(fields, info, lam, stiff, *flat)
+    return _condensed_solve(head, tail_diagonal, tail_off, coupling, -fields[_ROW_RESIDUAL])
+
+
+@njit(cache=True)
+def _secant_kernel(old_fields, new_fields, ell):
+    """Section tangents of the new iterate, with the secant slope
+    ``ΔM/Δkappa / ell`` where the tangent switched between the two iterates."""
+    n = ell.size
+    stiff = new_fields[_ROW_STIFF, :n].copy()
+    for i in range(n):
+        d_kappa = new_fields[_ROW_KAPPA, i] - old_fields[_ROW_KAPPA, i]
+        if stiff[i] != old_fields[_ROW_STIFF, i] and abs(d_kappa) > 1e-14:
+            d_moment = new_fields[_ROW_MOMENT, i] - old_fields[_ROW_MOMENT, i]
+            stiff[i] = d_moment / d_kappa / ell[i]
+    return stiff
+
+
+# ---------------------------------------------------------------- the problem
+
+
+@dataclass(frozen=True)
 class _Contact:
     """Closest point of the mid-line to the probe centre and its derivatives."""
 
@@ -118,91 +628,88 @@ class _Contact:
     distance: float  # signed distance from the mid-line to the probe centre
     normal: np.ndarray  # (2,) unit vector from the contact point to the probe centre
     tangent: np.ndarray  # (2,) normal rotated by -90°: along the strip, away from the clamp
-    jac: np.ndarray  # (2, N) d(point)/d(psi) at fixed u
-    dbeta: np.ndarray  # (N,) derivative of the normal's angle
+    normal_j: np.ndarray  # (reach,) a_n = normal·J = −d(gap)/d(psi)
+    tangent_j: np.ndarray  # (reach,) a_t = tangent·J
 
 
-def _directions(psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit tangents ``e`` and normals ``n`` (``e`` turned by +90°), shape (N, 2)."""
-    cos, sin = np.cos(psi), np.sin(psi)
-    e = np.empty((psi.size, 2))
-    n = np.empty((psi.size, 2))
-    e[:, 0], e[:, 1] = cos, sin
-    n[:, 0], n[:, 1] = -sin, cos
-    return e, n
-
-
-def _nodes(h: np.ndarray, e: np.ndarray) -> np.ndarray:
-    nodes = np.zeros((h.size + 1, 2))
-    np.cumsum(h[:, None] * e, axis=0, out=nodes[1:])
-    return nodes
-
-
-def _find_contact(
-    h: np.ndarray,
-    e: np.ndarray,
-    n: np.ndarray,
-    nodes: np.ndarray,
-    centre: np.ndarray,
-    preferred: int | None = None,
-) -> _Contact:
-    rel = centre[None, :] - nodes[:-1]
-    u_raw = np.einsum("ij,ij->i", e, rel)
-    u = np.clip(u_raw, 0.0, h)
-    closest = nodes[:-1] + u[:, None] * e
-    distance = np.sqrt(np.sum((centre[None, :] - closest) ** 2, axis=1))
-    k = int(np.argmin(distance))
-    if (
-        preferred is not None
-        and 0.0 < u_raw[preferred] < h[preferred]
-        and distance[preferred] - distance[k] < _HYSTERESIS * h[preferred]
-    ):
-        # Where the strip is concave towards the probe, the probe centre
-        # projects onto two neighbouring segments and the nearer one flips
-        # between Newton iterates; keep the segment in use until the
-        # projection leaves it (the other segment's overlap is ~rho·kink²).
-        k = preferred
-    N = h.size
-    jac = np.zeros((2, N))
-    if 0.0 < u_raw[k] < h[k]:
-        # Segment case: the signed distance stays meaningful for a Newton
-        # iterate that over-shoots the probe centre.
-        jac[:, :k] = (h[:k, None] * n[:k]).T
-        jac[:, k] = u_raw[k] * n[k]
-        dbeta = np.zeros(N)
-        dbeta[k] = 1.0
-        return _Contact(
-            k, False, k, float(u_raw[k]), closest[k], float(n[k] @ rel[k]), n[k], e[k], jac, dbeta
-        )
-    v = k + 1 if u_raw[k] >= h[k] else k  # the vertex is node v
-    point = nodes[v]
-    diff = centre - point
-    distance = float(np.hypot(diff[0], diff[1]))
-    normal = diff / distance
-    tangent = np.array([normal[1], -normal[0]])
-    jac[:, :v] = (h[:v, None] * n[:v]).T
-    dbeta = (tangent @ jac) / distance
-    return _Contact(min(v, N - 1), True, v, 0.0, point, distance, normal, tangent, jac, dbeta)
-
-
-@dataclass
+@dataclass(slots=True, eq=False)
 class _Evaluation:
-    """Residual of the KKT system at one iterate, with what its Jacobian needs."""
+    """Residual of the KKT system at one iterate, with what its Jacobian needs.
+
+    ``fields`` and ``info`` as the kernels write them (see the module's notes);
+    the properties read them by name. (Not frozen: one is built per iterate,
+    and a frozen dataclass's ``__init__`` is several times slower.)
+    """
 
     psi: np.ndarray
     lam: float
-    residual: np.ndarray  # (N+1,): moments [N·mm] then the gap [mm]
-    state: SectionState  # after the return mapping
-    moment: np.ndarray  # (N,) total moment at nodes 0..N-1 [N·mm]
-    stiff: np.ndarray  # (N,) tangent dM/dkappa / ell [N·mm]
-    kappa: np.ndarray  # (N,) curvature at the nodes [1/mm]
-    e: np.ndarray
-    contact: _Contact | None  # None without a probe
-    friction_n: float  # friction force on the strip along the contact tangent [N]
-    sticking: bool
-    slip_vec: np.ndarray
-    active: bool = True  # the contact force acts (False: the strip is off the probe)
-    gap: float = 0.0  # of a free strip: distance from the probe surface [mm], < 0 penetrates
+    fields: np.ndarray  # (_N_ROWS, N+1)
+    info: np.ndarray  # (_N_INFO,)
+    overstress: np.ndarray  # (N, n_fibres) of the section law, see return_mapping
+    loads: _Loads  # at this iterate
+    merit: float
+    converged: bool
+
+    @property
+    def active(self) -> bool:
+        """The contact force acts (False: the strip is off the probe)."""
+        return self.loads.active
+
+    @property
+    def residual(self) -> np.ndarray:
+        """(N+1,): moments [N·mm] then the gap [mm]."""
+        return self.fields[_ROW_RESIDUAL]
+
+    @property
+    def kappa(self) -> np.ndarray:
+        return self.fields[_ROW_KAPPA, :-1]
+
+    @property
+    def moment(self) -> np.ndarray:
+        return self.fields[_ROW_MOMENT, :-1]
+
+    @property
+    def stiff(self) -> np.ndarray:
+        return self.fields[_ROW_STIFF, :-1]
+
+    @property
+    def friction_n(self) -> float:
+        return float(self.info[_INFO_FRICTION])
+
+    @property
+    def sticking(self) -> bool:
+        return bool(self.info[_INFO_STICKING])
+
+    @property
+    def on_segment(self) -> bool:
+        """There is a probe and the nearest point lies inside a segment."""
+        return bool(self.info[_INFO_HAS_CONTACT]) and not self.info[_INFO_ON_VERTEX]
+
+    @property
+    def gap(self) -> float:
+        """Of a free strip: distance from the probe surface [mm], < 0 penetrates."""
+        return float(self.info[_INFO_GAP])
+
+    @property
+    def contact(self) -> _Contact | None:
+        """The nearest point of the mid-line to the probe; None without a probe."""
+        info = self.info
+        if not info[_INFO_HAS_CONTACT]:
+            return None
+        reach = int(info[_INFO_REACH])
+        normal = info[[_INFO_NORMAL_X, _INFO_NORMAL_Z]]
+        return _Contact(
+            segment=int(info[_INFO_SEGMENT]),
+            on_vertex=bool(info[_INFO_ON_VERTEX]),
+            upstream=int(info[_INFO_UPSTREAM]),
+            u=float(info[_INFO_U]),
+            point=info[[_INFO_POINT_X, _INFO_POINT_Z]],
+            distance=float(info[_INFO_DISTANCE]),
+            normal=normal,
+            tangent=np.array([normal[1], -normal[0]]),
+            normal_j=self.fields[_ROW_NORMAL_J, :reach],
+            tangent_j=self.fields[_ROW_TANGENT_J, :reach],
+        )
 
 
 @dataclass(frozen=True)
@@ -213,8 +720,54 @@ class _Configuration:
     lam: float
     state: SectionState
     friction_n: float
-    nodes: np.ndarray
-    e: np.ndarray
+    fields: np.ndarray  # of the converged iterate (its nodes and tangents count)
+    reference: _Reference = field(init=False, repr=False)  # what the kernels read
+
+    def __post_init__(self) -> None:
+        reference = _Reference(self.state.eps_p, self.fields, self.friction_n)
+        object.__setattr__(self, "reference", reference)
+
+    @property
+    def nodes(self) -> np.ndarray:
+        """(N+1, 2) node positions [mm]."""
+        return self.fields[[_ROW_X, _ROW_Z]].T
+
+
+@dataclass(slots=True, eq=False)
+class _Jacobian:
+    """The Jacobian of the residual, split at the contact's reach ``m``.
+
+    The unknowns ``psi[:m]`` and ``lam`` (the head) are coupled densely by the
+    contact. Downstream of the contact point ``psi[m:]`` (the tail) only the
+    section law, the end load and the weight act: a symmetric tridiagonal
+    block, which meets the head at ``J[m−1, m] = J[m, m−1] = coupling`` alone.
+    """
+
+    head: np.ndarray  # (m+1, m+1): rows and columns psi[:m], then lam
+    tail_diagonal: np.ndarray  # (N−m,)
+    tail_off: np.ndarray  # (N−m−1,) both off-diagonals
+    coupling: float
+
+    def dense(self) -> np.ndarray:
+        """The full (N+1, N+1) matrix, unknowns ``psi`` then ``lam``."""
+        m, n_tail = self.head.shape[0] - 1, self.tail_diagonal.size
+        n = m + n_tail
+        matrix = np.zeros((n + 1, n + 1))
+        order = np.r_[0:m, n]
+        matrix[np.ix_(order, order)] = self.head
+        matrix[m:n, m:n] = (
+            np.diag(self.tail_diagonal) + np.diag(self.tail_off, 1) + np.diag(self.tail_off, -1)
+        )
+        if m and n_tail:
+            matrix[m - 1, m] = matrix[m, m - 1] = self.coupling
+        return matrix
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray | None:
+        """``J⁻¹·rhs`` (see :func:`_condensed_solve`); None if ``J`` is singular."""
+        x, regular = _condensed_solve(
+            self.head, self.tail_diagonal, self.tail_off, self.coupling, rhs
+        )
+        return x if regular else None
 
 
 class _Problem:
@@ -240,36 +793,77 @@ class _Problem:
             h = np.concatenate([[0.0], h])  # the zero-length clamp segment
         self.h = h
         self.spring = clamp_stiffness_nmm
-        self.line_load = line_load_n_mm
         # Weight moment arm of each segment: the length it carries downstream.
         self.carried = np.cumsum(h[::-1])[::-1] - 0.5 * h
-        self.active = True  # the contact is in the active set
+        self.arc_at_nodes = np.concatenate([[0.0], np.cumsum(h)])
         self.N = h.size
-        self.width = width_mm
         # No probe (None) is for verification against the cantilever table.
-        self.has_probe = contact_radius_mm is not None
-        self.rho = contact_radius_mm if contact_radius_mm is not None else 0.0
-        self.centre = np.array([bending_length_mm, self.rho])
-        self.mu = friction
-        self.tension = tension_n
+        rho = contact_radius_mm if contact_radius_mm is not None else 0.0
+        self.loads = _Loads(float(tension_n), float(line_load_n_mm), True)
         ell = np.empty(self.N)
         ell[0] = h[0] / 2.0
         ell[1:] = 0.5 * (h[:-1] + h[1:])
         if self.spring is not None:
             ell[0] = 1.0  # placeholder: node 0 is the spring, not a section
         self.ell = ell
-        self.stiffness_scale = section.stiffness_nmm * width_mm / bending_length_mm
+        stiffness_scale = section.stiffness_nmm * width_mm / bending_length_mm  # D·b/l
         self.elastic_stiff = section.stiffness_nmm * width_mm / self.ell
         if self.spring is not None:
             self.elastic_stiff[0] = self.spring
-        self.stick_stiffness = _STICK_STIFFNESS_FACTOR * self.stiffness_scale / bending_length_mm**2
-        self._diag = np.arange(self.N)
+        self.rod = _Rod(
+            h=h,
+            ell=ell,
+            width=float(width_mm),
+            carried=self.carried,
+            spring=float(self.spring or 0.0),
+            has_spring=self.spring is not None,
+            centre_x=float(bending_length_mm),
+            centre_z=float(rho),
+            rho=float(rho),
+            has_probe=contact_radius_mm is not None,
+            mu=float(friction),
+            stick_stiffness=_STICK_STIFFNESS_FACTOR * stiffness_scale / bending_length_mm**2,
+            moment_weight=1.0 / stiffness_scale,
+            gap_weight=1.0 / bending_length_mm,
+        )
+
+    @property
+    def active(self) -> bool:
+        """The contact is in the active set."""
+        return self.loads.active
+
+    @active.setter
+    def active(self, value: bool) -> None:
+        self.loads = self.loads._replace(active=value)
+
+    @property
+    def tension(self) -> float:
+        return self.loads.tension
+
+    @tension.setter
+    def tension(self, value: float) -> None:
+        self.loads = self.loads._replace(tension=float(value))
+
+    @property
+    def line_load(self) -> float:
+        return self.loads.line_load
+
+    @line_load.setter
+    def line_load(self, value: float) -> None:
+        self.loads = self.loads._replace(line_load=float(value))
 
     def configuration(
         self, psi: np.ndarray, lam: float, state: SectionState, friction_n: float
     ) -> _Configuration:
-        e, _ = _directions(psi)
-        return _Configuration(psi, lam, state, friction_n, _nodes(self.h, e), e)
+        fields = np.zeros((_N_ROWS, self.N + 1))
+        _geometry(psi, self.h, fields)
+        return _Configuration(psi, lam, state, friction_n, fields)
+
+    def accept(self, ev: _Evaluation, before: _Configuration) -> _Configuration:
+        """The converged iterate ``ev`` of the step from ``before``, as the next
+        step's reference (the fibres' plastic strains updated)."""
+        state = self.section.updated_state(before.state, ev.overstress)
+        return _Configuration(ev.psi, ev.lam, state, ev.friction_n, ev.fields)
 
     def evaluate(
         self,
@@ -279,154 +873,58 @@ class _Problem:
         previous: _Configuration,
         preferred: int | None = None,
     ) -> _Evaluation:
-        """Residual of equilibrium and of the gap at ``(psi, lam)``."""
-        N, h = self.N, self.h
-        kappa, moment, stiff, state = self._bending(psi, theta, previous.state)
-        residual = np.empty(N + 1)
-        residual[:N] = moment
-        residual[: N - 1] -= moment[1:]
-        e, n = _directions(psi)
-        if self.tension:
-            residual[:N] += self.tension * h * e[:, 1]
-        if self.line_load:
-            residual[:N] += self.line_load * h * self.carried * e[:, 0]
-        contact = (
-            _find_contact(h, e, n, _nodes(h, e), self.centre, preferred) if self.has_probe else None
+        """Residual of equilibrium and of the gap at ``(psi, lam)``; ``preferred``:
+        the contact segment to keep while the probe centre projects onto it."""
+        fields, info, overstress = _evaluate_kernel(
+            psi,
+            float(lam),
+            float(theta),
+            -1 if preferred is None else preferred,
+            *self.loads,
+            *self.rod,
+            *self.section.fibres,
+            *previous.reference,
         )
-        active = contact is not None and self.active
-        friction, sticking, slip_vec = 0.0, False, np.zeros(2)
-        if contact is None or not active:
-            residual[N] = lam  # no probe, or the strip is off it: no contact force
-        else:
-            residual[:N] += lam * (contact.normal @ contact.jac)
-            residual[N] = contact.distance - self.rho
-        if active and self.mu:
-            assert contact is not None
-            friction, sticking, slip_vec = self._friction(contact, lam, previous)
-            residual[:N] -= friction * (contact.tangent @ contact.jac)
         return _Evaluation(
             psi,
-            lam,
-            residual,
-            state,
-            moment,
-            stiff,
-            kappa,
-            e,
-            contact,
-            friction,
-            sticking,
-            slip_vec,
-            active=active,
-            gap=0.0 if contact is None else contact.distance - self.rho,
+            float(lam),
+            fields,
+            info,
+            overstress,
+            self.loads,
+            float(info[_INFO_MERIT]),
+            bool(info[_INFO_CONVERGED]),
         )
 
-    def _bending(
-        self, psi: np.ndarray, theta: float, previous: SectionState
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, SectionState]:
-        """Curvatures ``kappa`` at the nodes, the moments and tangent stiffnesses of
-        the section law (full width), and the new section state; node 0 carries
-        the clamp spring instead when there is one."""
-        kappa = np.empty(self.N)
-        kappa[0] = psi[0] - theta
-        kappa[1:] = psi[1:] - psi[:-1]
-        kappa /= self.ell
-        if self.spring is not None:
-            rotation = kappa[0]
-            kappa[0] = 0.0  # the spring node keeps an unused, unloaded section
-        m_unit, c_unit, state = self.section.respond(kappa, previous)
-        moment = m_unit * self.width
-        stiff = c_unit * self.width / self.ell
-        if self.spring is not None:
-            moment[0] = self.spring * rotation
-            stiff[0] = self.spring
-        return kappa, moment, stiff, state
-
-    def _friction(
-        self, contact: _Contact, lam: float, previous: _Configuration
-    ) -> tuple[float, bool, np.ndarray]:
-        """The friction force, whether it sticks, and the slip of the material point
-        in contact since ``previous``."""
-        if contact.on_vertex:
-            before = previous.nodes[contact.upstream]
-        else:
-            k = contact.segment
-            before = previous.nodes[k] + contact.u * previous.e[k]
-        slip_vec = contact.point - before
-        # Coulomb's law by return mapping: stick elastically, else slide.
-        slip = float(contact.tangent @ slip_vec)
-        trial = previous.friction_n - self.stick_stiffness * slip
-        limit = self.mu * max(lam, 0.0)
-        sticking = abs(trial) <= limit
-        friction = trial if sticking else float(np.copysign(limit, trial))
-        return friction, sticking, slip_vec
-
     def jacobian(self, ev: _Evaluation, stiff: np.ndarray | None = None) -> np.ndarray:
-        """Exact derivative of ``ev.residual`` with respect to ``(psi, lam)``.
+        """Exact derivative of ``ev.residual`` with respect to ``(psi, lam)``, dense.
 
         ``stiff`` replaces the section tangents (see :func:`_newton`).
         """
-        N, h, idx = self.N, self.h, self._diag
-        contact, lam = ev.contact, ev.lam
-        stiff = ev.stiff if stiff is None else stiff
-        jacobian = np.zeros((N + 1, N + 1))
-        diag = stiff.copy()
-        diag[:-1] += stiff[1:]
-        if self.tension:
-            diag += self.tension * h * ev.e[:, 0]
-        if self.line_load:
-            diag -= self.line_load * h * self.carried * ev.e[:, 1]
-        jacobian[idx, idx] = diag
-        jacobian[idx[:-1], idx[1:]] = -stiff[1:]
-        jacobian[idx[1:], idx[:-1]] = -stiff[1:]
-        if contact is None or not ev.active:
-            jacobian[N, N] = 1.0
-            return jacobian
-        k, up = contact.segment, contact.upstream
-        d_hat, tau, dbeta = contact.normal, contact.tangent, contact.dbeta
-        normal_j = d_hat @ contact.jac  # = -d(gap)/d(psi)
-        tangent_j = tau @ contact.jac
-        e_up = ev.e[:up]
-        # Hessian of the gap, times -lam.
-        hess = np.outer(tangent_j, dbeta)
-        hess[idx[:up], idx[:up]] += h[:up] * (e_up @ d_hat)
-        if not contact.on_vertex:
-            hess[k, :] += tangent_j
-            hess[k, k] -= contact.distance
-        block = jacobian[:N, :N]
-        block -= lam * hess
-        jacobian[:N, N] = normal_j
-        jacobian[N, :N] = -normal_j
-        if self.mu:
-            # d(tau·J)/d(psi), times the friction force
-            turn = np.outer(normal_j, dbeta)
-            turn[idx[:up], idx[:up]] -= h[:up] * (e_up @ tau)
-            if not contact.on_vertex:
-                turn[k, k] -= contact.u
-            block -= ev.friction_n * turn
-            if ev.sticking:
-                dslip = tangent_j + dbeta * float(d_hat @ ev.slip_vec)
-                block += self.stick_stiffness * np.outer(tangent_j, dslip)
-            elif lam > 0.0:
-                jacobian[:N, N] -= self.mu * np.sign(ev.friction_n) * tangent_j
-        return jacobian
+        return self.jacobian_parts(ev, stiff).dense()
 
-    def residual_scales(self) -> tuple[np.ndarray, np.ndarray]:
-        """Weights that make the residual dimensionless (moments by D·b/l, the
-        gap by l) and the convergence tolerance of each scaled entry."""
-        weights = np.full(self.N + 1, 1.0 / self.stiffness_scale)
-        weights[-1] = 1.0 / self.centre[0]
-        tolerance = np.full(self.N + 1, 1e-9)
-        tolerance[-1] = 1e-10
-        return weights, tolerance
+    def jacobian_parts(self, ev: _Evaluation, stiff: np.ndarray | None = None) -> _Jacobian:
+        """:meth:`jacobian` as its dense head and tridiagonal tail."""
+        stiff = ev.stiff if stiff is None else stiff
+        parts = _jacobian_kernel(ev.fields, ev.info, ev.lam, stiff, *ev.loads, *self.rod)
+        return _Jacobian(*parts)
+
+    def newton_direction(self, ev: _Evaluation, stiff: np.ndarray | None) -> np.ndarray | None:
+        """``−J⁻¹·residual``; None where ``J`` is singular."""
+        stiff = ev.stiff if stiff is None else stiff
+        delta, regular = _newton_direction(ev.fields, ev.info, ev.lam, stiff, *ev.loads, *self.rod)
+        return delta if regular else None
 
     def forces(self, ev: _Evaluation) -> tuple[float, float]:
-        """Resultant and perpendicular force on the probe [N]."""
-        contact = ev.contact
-        if contact is None or not ev.active:
+        """Resultant and perpendicular force on the probe [N]: ``lam·n − f·t``."""
+        info = ev.info
+        if not info[_INFO_HAS_CONTACT] or not ev.active:
             return 0.0, 0.0
-        on_probe = ev.lam * contact.normal - ev.friction_n * contact.tangent
-        return float(np.hypot(on_probe[0], on_probe[1])), float(on_probe[1])
+        normal_x, normal_z = float(info[_INFO_NORMAL_X]), float(info[_INFO_NORMAL_Z])
+        friction = float(info[_INFO_FRICTION])
+        on_probe_x = ev.lam * normal_x - friction * normal_z
+        on_probe_z = ev.lam * normal_z + friction * normal_x
+        return math.hypot(on_probe_x, on_probe_z), on_probe_z
 
 
 def _newton(
@@ -444,48 +942,44 @@ def _newton(
     search on the scaled residual guards the step: together they stop the
     cycling of plain Newton when a fibre sits at its yield point.
     """
-    weights, tolerance = problem.residual_scales()
     preferred = None
 
-    def attempt(psi: np.ndarray, lam: float) -> tuple[_Evaluation, float]:
+    def attempt(psi: np.ndarray, lam: float) -> _Evaluation:
         nonlocal preferred
         ev = problem.evaluate(psi, lam, theta, previous, preferred)
-        if ev.contact is not None and not ev.contact.on_vertex:
-            preferred = ev.contact.segment
-        merit = float(np.sum((ev.residual * weights) ** 2))
-        return ev, merit if np.isfinite(merit) else np.inf
+        if ev.on_segment:
+            preferred = int(ev.info[_INFO_SEGMENT])
+        return ev
 
-    ev, merit = attempt(psi, lam)
+    ev = attempt(psi, lam)
     stiff = None
-    best, since_best = merit, 0
+    best, since_best = ev.merit, 0
     for _ in range(_MAX_NEWTON):
-        if not np.isfinite(merit):
+        if ev.merit == math.inf:
             return None
-        scaled = np.abs(ev.residual * weights)
-        if np.all(scaled < tolerance):
+        if ev.converged:
             return ev
         if since_best >= _STALL_ITERATIONS:
             return None  # stalled: leave it to _initial_stiffness
-        try:
-            delta = np.linalg.solve(problem.jacobian(ev, stiff), -ev.residual)
-        except np.linalg.LinAlgError:
+        delta = problem.newton_direction(ev, stiff)
+        if delta is None:
             return None
         # Limit the rotation update: the contact search is only valid nearby.
-        step = min(1.0, 0.2 / max(float(np.max(np.abs(delta[:-1]))), 1e-300))
+        step = min(1.0, 0.2 / max(float(np.abs(delta[:-1]).max()), 1e-300))
         full_step = step
         for _ in range(_MAX_BACKTRACKS):
-            trial, trial_merit = attempt(ev.psi + step * delta[:-1], ev.lam + step * delta[-1])
-            if trial_merit < (1.0 - 1e-4 * step) * merit:
+            trial = attempt(ev.psi + step * delta[:-1], ev.lam + step * float(delta[-1]))
+            if trial.merit < (1.0 - 1e-4 * step) * ev.merit:
                 break
             step *= 0.5
-        stiff = _secant_stiffness(problem, ev, trial)
+        stiff = _secant_kernel(ev.fields, trial.fields, problem.ell)
         if step < full_step:
             # A kink stopped the full step: let fully plastic nodes see that
             # they may unload (their tangent is zero on the loading side).
             stiff = np.maximum(stiff, _UNLOADING_FLOOR * problem.elastic_stiff)
-        ev, merit = trial, trial_merit
-        if merit < 0.5 * best:
-            best, since_best = merit, 0
+        ev = trial
+        if ev.merit < 0.5 * best:
+            best, since_best = ev.merit, 0
         else:
             since_best += 1
     return None
@@ -507,14 +1001,12 @@ def _initial_stiffness(
     (the classic initial-stiffness method) lets that node unload; it converges
     linearly, in a few hundred cheap iterations, so it is kept for this case.
     """
-    weights, tolerance = problem.residual_scales()
     ev = problem.evaluate(psi, lam, theta, previous)
     factors = None
     for iteration in range(_MAX_INITIAL_STIFFNESS):
-        scaled = np.abs(ev.residual * weights)
-        if not np.all(np.isfinite(scaled)):
+        if ev.merit == math.inf:
             return None
-        if np.all(scaled < tolerance):
+        if ev.converged:
             return ev
         if iteration % _REFACTOR_EVERY == 0:  # the contact geometry drifts slowly
             try:
@@ -524,31 +1016,20 @@ def _initial_stiffness(
             except (np.linalg.LinAlgError, ValueError):
                 return None
         delta = scipy.linalg.lu_solve(factors, -ev.residual, check_finite=False)
-        preferred = None if ev.contact is None or ev.contact.on_vertex else ev.contact.segment
+        preferred = int(ev.info[_INFO_SEGMENT]) if ev.on_segment else None
         ev = problem.evaluate(ev.psi + delta[:-1], ev.lam + delta[-1], theta, previous, preferred)
     return None
 
 
-def _secant_stiffness(problem: _Problem, old: _Evaluation, new: _Evaluation) -> np.ndarray:
-    """Section tangents of ``new``, with secants where the tangent switched."""
-    switched = (new.stiff != old.stiff) & (np.abs(new.kappa - old.kappa) > 1e-14)
-    if not np.any(switched):
-        return new.stiff
-    stiff = new.stiff.copy()
-    secant = (new.moment - old.moment)[switched] / (new.kappa - old.kappa)[switched]
-    stiff[switched] = secant / problem.ell[switched]
-    return stiff
-
-
-def _record(problem: _Problem, ev: _Evaluation) -> tuple[float, ...]:
+def _record(problem: _Problem, ev: _Evaluation, current: _Configuration) -> tuple[float, ...]:
     force, perp = problem.forces(ev)
-    contact = ev.contact
-    assert contact is not None  # a run with a probe always has a contact
-    arc = float(np.sum(problem.h[: contact.upstream]) + contact.u)
-    kappa_p = problem.section.plastic_curvature(ev.state)
+    info = ev.info
+    arc = float(problem.arc_at_nodes[int(info[_INFO_UPSTREAM])] + info[_INFO_U])
+    eps_p = current.state.eps_p
+    kappa_p = np.abs(problem.section.plastic_curvature(current.state)).max() if eps_p.any() else 0.0
     # The probe bends the strip clockwise (negative curvature): report the
     # clamp moment with the sign of the lifting rotation.
-    return (force, perp, ev.lam, arc, -float(ev.moment[0]), float(np.max(np.abs(kappa_p))))
+    return (force, perp, ev.lam, arc, -float(ev.moment[0]), float(kappa_p))
 
 
 def solve_rod(
@@ -614,8 +1095,8 @@ def _history(problem: _Problem, angles_deg: np.ndarray) -> RodSolution:
     """March ``problem`` through ``angles_deg`` and record each converged state."""
     at_rest = (0.0, 0.0, 0.0, problem.bending_length, 0.0, 0.0)
     history = [
-        at_rest if ev is None else _record(problem, ev)
-        for ev, _ in _march(problem, np.radians(angles_deg))
+        at_rest if ev is None else _record(problem, ev, current)
+        for ev, current in _march(problem, np.radians(angles_deg))
     ]
     columns = np.array(history).T
     return RodSolution(
@@ -630,20 +1111,88 @@ def _history(problem: _Problem, angles_deg: np.ndarray) -> RodSolution:
     )
 
 
+class _Predictor:
+    """Extrapolates ``(psi, lam)`` to the next angle from the last converged steps.
+
+    Linearly through the last two states, or quadratically through the last
+    three (Newton's divided differences in ``theta``), whichever would have
+    predicted the last step's angles better: a smoothly bending strip suits the
+    quadratic guess, which then often converges in one Newton iteration; a
+    strip turning about a plastic hinge moves linearly between kinks, where the
+    linear guess is often already converged.
+    """
+
+    def __init__(self, n_unknowns: int) -> None:
+        self.slope = np.zeros(n_unknowns)  # first divided difference over the last step
+        self.bend = np.zeros(n_unknowns)  # second divided difference over the last two
+        self.last_span = 0.0  # the last step [rad]
+        self.quadratic = False
+
+    def guess(self, psi: np.ndarray, lam: float, span: float) -> tuple[np.ndarray, float]:
+        """The extrapolation ``span`` after the converged ``(psi, lam)``; ``lam >= 0``."""
+        curve = self.last_span + span if self.quadratic else 0.0
+        return _extrapolate(psi, lam, self.slope, self.bend, span, curve)
+
+    def update(self, before: _Configuration, after: _Evaluation, span: float) -> None:
+        """Take in the step of ``span`` from ``before`` to ``after``."""
+        quadratic = _update_differences(
+            before.psi,
+            before.lam,
+            after.psi,
+            after.lam,
+            span,
+            self.last_span,
+            self.slope,
+            self.bend,
+        )
+        if self.last_span:
+            self.quadratic = quadratic
+        self.last_span = span
+
+
+@njit(cache=True)
+def _extrapolate(psi, lam, slope, bend, span, curve):
+    """``x + (slope + bend·curve)·span`` for ``x = (psi, lam)``, ``lam`` kept ``>= 0``."""
+    n = psi.size
+    guess = np.empty(n)
+    for i in range(n):
+        guess[i] = psi[i] + (slope[i] + bend[i] * curve) * span
+    return guess, max(lam + (slope[n] + bend[n] * curve) * span, 0.0)
+
+
+@njit(cache=True)
+def _update_differences(before_psi, before_lam, after_psi, after_lam, span, last_span, slope, bend):
+    """Newton's divided differences of ``(psi, lam)`` over the step just taken, in
+    place; whether the quadratic guess would have predicted its ``psi`` better
+    (smaller largest error) than the linear one (without a last step: False)."""
+    n = before_psi.size
+    linear_miss = quadratic_miss = 0.0
+    for i in range(n + 1):
+        new = (after_psi[i] - before_psi[i] if i < n else after_lam - before_lam) / span
+        if last_span:
+            change = new - slope[i]  # the linear guess's error, per span
+            if i < n:
+                linear_miss = max(linear_miss, abs(change))
+                quadratic_miss = max(quadratic_miss, abs(change - bend[i] * (span + last_span)))
+            bend[i] = change / (span + last_span)
+        slope[i] = new
+    return quadratic_miss < linear_miss
+
+
 def _march(
     problem: _Problem, angles_rad: np.ndarray
 ) -> Iterator[tuple[_Evaluation | None, _Configuration]]:
     """Rotate the clamp through ``angles_rad``; yield each converged state.
 
     Each interval is one load step, bisected when Newton fails; the
-    predictor extrapolates the last step's rates. ``None`` stands for the
-    unloaded state at 0°.
+    predictor extrapolates the last steps (see :class:`_Predictor`). ``None``
+    stands for the unloaded state at 0°.
     """
     n = problem.N
     current = problem.configuration(np.zeros(n), 0.0, problem.section.initial_state(n), 0.0)
     if problem.line_load:
         current = _sag(problem, current)
-    rates = (np.zeros(n), 0.0)  # d(psi)/d(theta), d(lam)/d(theta) of the last step
+    predictor = _Predictor(n + 1)
     theta_done = 0.0
     last: _Evaluation | None = None
     for target in angles_rad:
@@ -651,8 +1200,7 @@ def _march(
         while theta_done < target - 1e-12:
             theta = min(target, theta_done + span / substeps)
             dtheta = theta - theta_done
-            guess_psi = current.psi + rates[0] * dtheta
-            guess_lam = max(current.lam + rates[1] * dtheta, 0.0)
+            guess_psi, guess_lam = predictor.guess(current.psi, current.lam, dtheta)
             ev = _step(problem, guess_psi, guess_lam, theta, current)
             if ev is None:
                 substeps *= 2
@@ -664,8 +1212,8 @@ def _march(
                     )
                 continue
             _check_contact(ev, n, theta)
-            rates = ((ev.psi - current.psi) / dtheta, (ev.lam - current.lam) / dtheta)
-            current = problem.configuration(ev.psi, ev.lam, ev.state, ev.friction_n)
+            predictor.update(current, ev, dtheta)
+            current = problem.accept(ev, current)
             theta_done = theta
             last = ev
         yield last, current
@@ -710,7 +1258,7 @@ def _sag(problem: _Problem, rest: _Configuration) -> _Configuration:
         ev = _newton(problem, current.psi, 0.0, 0.0, current)
         if ev is None:
             raise SolverError("the strip did not find its equilibrium under its own weight at 0°")
-        current = problem.configuration(ev.psi, 0.0, ev.state, 0.0)
+        current = problem.accept(ev, current)
     problem.line_load = load
     if ev.gap < 0.0:  # cannot happen with the probe above the strip; kept as a guard
         problem.active = True
@@ -718,9 +1266,9 @@ def _sag(problem: _Problem, rest: _Configuration) -> _Configuration:
 
 
 def _check_contact(ev: _Evaluation, n_segments: int, theta: float) -> None:
-    if ev.contact is None or not ev.active:
+    if not ev.info[_INFO_HAS_CONTACT] or not ev.active:
         return
-    if ev.contact.upstream >= n_segments:
+    if ev.info[_INFO_UPSTREAM] >= n_segments:
         raise SolverError(
             f"the strip slid off the probe at {np.degrees(theta):.2f}°; increase free_length_mm"
         )
@@ -770,7 +1318,7 @@ def solve_cantilever(
             ev = _newton(problem, current.psi, 0.0, theta, current)
             if ev is None:
                 raise SolverError(f"the cantilever did not converge at a load of {sub:g} N")
-            current = problem.configuration(ev.psi, 0.0, ev.state, 0.0)
+            current = problem.accept(ev, current)
         load_done = load
         tip = current.nodes[-1]
         tips.append((tip[0], length - tip[1]))

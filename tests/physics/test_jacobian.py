@@ -1,4 +1,5 @@
-"""The Newton Jacobian of the rod solver against central finite differences."""
+"""The Newton Jacobian of the rod solver against central finite differences, and
+Newton's condensed linear solve against a dense one."""
 
 import numpy as np
 import pytest
@@ -31,6 +32,12 @@ def _check(problem, previous, psi, lam, theta):
         ) / (2 * step)
     # Central differences: truncation ~1e-14 relative, round-off ~1e-9.
     np.testing.assert_allclose(analytic, numeric, atol=1e-6 * np.max(np.abs(analytic)))
+    # Newton's step condenses the tridiagonal tail onto the contact's head: the
+    # same solution as a dense LU, to round-off times the condition number
+    # (at most ~3e6 here, with the sticking penalty) of the step's largest entry.
+    dense = np.linalg.solve(analytic, -ev.residual)
+    condensed = problem.jacobian_parts(ev).solve(-ev.residual)
+    np.testing.assert_allclose(condensed, dense, rtol=0, atol=1e-9 * np.max(np.abs(dense)))
     return ev
 
 
