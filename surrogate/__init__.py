@@ -6,6 +6,7 @@ of the same name. Heavy parts (scikit-learn, pandas, Optuna) load on first use.
 The packages, top down (a package imports from its own row or the rows below)::
 
     _cli.py → this API (here)
+      → report/       one HTML page of what a study's storage holds
       → identify/     the main job: loop, verify study, workers, export
         calibration/  measurements → calibrate → compare → diagnose
       → solvers/ (builtin, CalculiX, LS-DYNA), gp/, effects/, study/, storage/
@@ -46,6 +47,8 @@ _LAZY = {
     "compare": ".calibration",
     "ExportResult": ".identify",
     "export": ".identify",
+    "ReportResult": ".report",
+    "report": ".report",
     "Effect": ".effects",
     "EffectParameter": ".effects",
     "ModelState": ".effects",
@@ -72,6 +75,7 @@ __all__ = [
     "ParameterSpace",
     "ParameterSpec",
     "PredictResult",
+    "ReportResult",
     "Rig",
     "RunResult",
     "SampleSet",
@@ -92,6 +96,7 @@ __all__ = [
     "paper_stage1_design",
     "predict",
     "register_effect",
+    "report",
     "run",
     "simulate",
 ]

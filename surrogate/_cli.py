@@ -200,12 +200,13 @@ def _parse_effects(items: list[str]) -> dict[str, dict[str, float]]:
     return effects
 
 
-def _parse_conditions(items: list[str]) -> dict[str, object]:
+def _parse_conditions(items: list[str], option: str = "--condition") -> dict[str, object]:
+    """``NAME=VALUE`` items (a value a number where it reads as one)."""
     conditions: dict[str, object] = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep:
-            raise InputDataError(f"--condition {item!r}: expected NAME=VALUE, e.g. direction=weft")
+            raise InputDataError(f"{option} {item!r}: expected NAME=VALUE, e.g. direction=weft")
         try:
             conditions[key.strip()] = float(value)
         except ValueError:
@@ -569,10 +570,12 @@ def _parse_params(text: str | None) -> dict[str, float] | None:
 
 
 def _add_export(commands: _Subparsers) -> argparse.ArgumentParser:
+    from .identify._export import EXPORT_SOURCES, TCOAT_CONVENTIONS
+
     exporting = commands.add_parser(
-        "export", help="the verified optimum of a study as LS-DYNA keyword text"
+        "export", help="a verified or calibrated coating as LS-DYNA keyword text"
     )
-    exporting.add_argument("study", type=Path, help="study file (after surrogate run)")
+    exporting.add_argument("study", type=Path, help="study file (after surrogate run or calibrate)")
     exporting.add_argument("--format", choices=("lsdyna",), default="lsdyna", help="output format")
     exporting.add_argument("--output", type=Path, help="write the snippet to this file")
     _add_storage(exporting, help="Optuna storage URL (default: the study's)")
@@ -582,7 +585,27 @@ def _add_export(commands: _Subparsers) -> argparse.ArgumentParser:
         default="mm-N-s",
         help="unit system of your deck (default mm-N-s: MPa)",
     )
-    _add_plugin(exporting)
+    exporting.add_argument(
+        "--tcoat",
+        choices=tuple(TCOAT_CONVENTIONS),
+        default="thickness",
+        help="how TCOAT is written: thickness (> 0, read alike by every LS-DYNA version; "
+        "default), bending-only (< 0, R12 / FORM -14 reading), ratio (< 0, over the "
+        "shell thickness, recent manuals)",
+    )
+    exporting.add_argument(
+        "--from",
+        dest="source",
+        choices=EXPORT_SOURCES,
+        help="the surrogate run point or the calibration of the study's model (default: run "
+        "for a study with an F60 target, else calibration)",
+    )
+    exporting.add_argument(
+        "--at",
+        default="",
+        help="conditions a calibrated coat is evaluated at, e.g. tension_n=40,rate_deg_s=90",
+    )
+    _add_model_options(exporting)
     _add_json(exporting)
     return exporting
 
@@ -596,6 +619,10 @@ def _export(args: argparse.Namespace) -> int:
         output=args.output,
         storage=args.storage,
         units=args.units,
+        tcoat=args.tcoat,
+        source=args.source,
+        at=_parse_conditions([item for item in args.at.split(",") if item.strip()], "--at"),
+        effects=args.effect,
         plugins=args.plugin,
     )
     if args.json:
@@ -603,7 +630,48 @@ def _export(args: argparse.Namespace) -> int:
     elif args.output is None:
         print(result.text, end="")
     else:
-        print(f"verify trial #{result.trial_number} of {result.study} written to {result.output}")
+        what = (
+            f"verify trial #{result.trial_number}"
+            if result.source == "run"
+            else f"the {result.status} calibration"
+        )
+        print(f"{what} of {result.study} written to {result.output}")
+    return 0
+
+
+# surrogate report ----------------------------------------------------------------------
+
+
+def _add_report(commands: _Subparsers) -> argparse.ArgumentParser:
+    reporting = commands.add_parser(
+        "report", help="one self-contained HTML page of a study's results, to sign off"
+    )
+    reporting.add_argument(
+        "study", type=Path, help="study file (after surrogate run, calibrate or diagnose)"
+    )
+    reporting.add_argument(
+        "--output",
+        type=Path,
+        help="HTML file to write (default: <study folder>/<name>-report.html)",
+    )
+    _add_storage(reporting, help="Optuna storage URL (default: the study's)")
+    _add_plugin(reporting)
+    _add_json(reporting)
+    return reporting
+
+
+def _report(args: argparse.Namespace) -> int:
+    from .report import report
+
+    result = report(args.study, output=args.output, storage=args.storage, plugins=args.plugin)
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(f"report of {result.study!r} written to {result.output}")
+    for sentence in dict.fromkeys(result.missing.values()):  # parts may share one reason
+        print(f"  {sentence}")
+    if result.attached:
+        print(f"listed in the dashboard of {', '.join(map(repr, result.attached))}")
     return 0
 
 
@@ -762,6 +830,7 @@ _COMMANDS: tuple[tuple[Callable[[_Subparsers], argparse.ArgumentParser], _Handle
     (_add_calibrate, _calibrate),
     (_add_compare, _compare),
     (_add_export, _export),
+    (_add_report, _report),
     (_add_diagnose, _diagnose),
     (_add_dashboard, _dashboard),
     (_add_worker, _worker),

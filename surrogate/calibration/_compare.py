@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +33,16 @@ from ._loop import SolverRuns, calibration_note
 from ._problem import CalibrationProblem, calibration_study_name, load_calibration, model_label
 from ._statistics import column_values
 
-__all__ = ["BANDS", "CompareResult", "angle_bands", "compare", "latest_calibration"]
+__all__ = [
+    "BANDS",
+    "CompareResult",
+    "Comparison",
+    "angle_bands",
+    "compare",
+    "comparison",
+    "comparison_figures",
+    "latest_calibration",
+]
 
 BAND_HALF_WIDTH_DEG = 10.0
 BANDS = ("elastic rise", "transition", "plateau")
@@ -71,13 +80,34 @@ class CompareResult:
         return asdict(self)
 
 
-def latest_calibration(storage: str, name: str) -> dict[str, Any] | None:
-    """The stored result of the calibration study ``name``, if any."""
+def latest_calibration(
+    storage: str | optuna.storages.BaseStorage, name: str
+) -> dict[str, Any] | None:
+    """The stored result of the calibration study ``name`` in ``storage`` (a URL or an
+    opened storage), if any."""
     try:
         study = optuna.load_study(study_name=name, storage=storage)
     except KeyError:
         return None
     return study.user_attrs.get("result")
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """What :func:`compare` computes before it plots and records anything.
+
+    ``curves`` are the model's curves (G, A) on the problem's whole degrees, one per
+    condition group; ``residual`` is measured − model at every measured point;
+    ``stored`` the calibration record the parameters came from (None for given
+    parameters); ``storage`` the storage URL; ``result`` the record (no plots yet).
+    """
+
+    problem: CalibrationProblem
+    curves: np.ndarray
+    residual: np.ndarray
+    stored: dict[str, Any] | None
+    storage: str
+    result: CompareResult
 
 
 def compare(
@@ -109,17 +139,41 @@ def compare(
     """
     if progress:
         show_progress()
+    found = comparison(study, params=params, effects=effects, plugins=plugins, storage=storage)
+    result, problem = found.result, found.problem
+    if plots:
+        spec = problem.spec
+        folder = Path(output_dir) if output_dir else spec.directory / f"{spec.name}-compare"
+        files = _plots(problem, found.curves, found.residual, result.tests, folder, result.effects)
+        result = replace(result, plots=files)
+    _attach(found, result)
+    if progress:
+        _LOG.info("[%s] %s", result.study, result.message)
+    return result
+
+
+def comparison(
+    study: Any,
+    *,
+    params: Mapping[str, float] | None = None,
+    effects: Sequence[str] | None = None,
+    plugins: Sequence[str] = (),
+    storage: str | None = None,
+    solve: bool = True,
+) -> Comparison:
+    """The comparison of :func:`compare` (same arguments), without plots, without
+    writing to the storage and without logging. ``solve=False`` takes the model curves
+    from the result cache only and refuses (InputDataError) when a run is not there
+    (a reader that must not start an hour-long external solver run)."""
     spec, data, chosen, noise = load_calibration(study, effects, plugins)
     problem = CalibrationProblem(spec, data, chosen)
     url = storage or spec.default_storage()
     name = calibration_study_name(spec, chosen)
     stored = None if params is not None else latest_calibration(url, name)
     theta = _parameters(problem, params if stored is None else stored["params"], url, name)
-    curves = _model_curves(problem, theta)
+    curves = _model_curves(problem, theta, solve=solve)
     residual = problem.residuals(curves)
     tests = _per_test(problem, residual)
-    folder = Path(output_dir) if output_dir else spec.directory / f"{spec.name}-compare"
-    files = _plots(problem, curves, residual, tests, folder, chosen) if plots else []
     rmse = float(np.sqrt(np.mean(residual**2)))
     bands = _band_table(problem, curves, residual)
     result = CompareResult(
@@ -131,22 +185,27 @@ def compare(
         tests=tests,
         bands=bands,
         covariates=_covariate_correlations(problem, tests),
-        plots=files,
+        plots=[],
         calibration=_claims(stored),
         study=name,
         message=_message(chosen, rmse, noise, tests, bands, stored),
     )
-    _attach(url, name, problem, curves, residual, tests, result, stored)
-    if progress:
-        _LOG.info("[%s] %s", name, result.message)
-    return result
+    return Comparison(problem, curves, residual, stored, url, result)
 
 
-def _model_curves(problem: CalibrationProblem, theta: np.ndarray) -> np.ndarray:
-    """The full solver's curves (G, A) at ``theta`` for every condition group."""
+def _model_curves(problem: CalibrationProblem, theta: np.ndarray, *, solve: bool) -> np.ndarray:
+    """The full solver's curves (G, A) at ``theta`` for every condition group (``solve``
+    False: from the result cache only)."""
     runs = SolverRuns(problem, problem.spec.directory / ".solver-cache", jobs=1)
     G = len(problem.groups)
-    out = runs.run(np.repeat(theta[None, :], G, axis=0), list(range(G)))
+    thetas, groups = np.repeat(theta[None, :], G, axis=0), list(range(G))
+    absent = [] if solve else [k for k in runs.keys(thetas, groups) if k not in runs.cache]
+    if absent:
+        raise InputDataError(
+            f"{len(absent)} of its {G} full-solver runs ({problem.spec.solver}) are not in the "
+            f"result cache {runs.cache.directory}; make them with `surrogate compare`"
+        )
+    out = runs.run(thetas, groups)
     done = [o for o in out if o is not None]
     if len(done) < len(out):
         raise SolverError(
@@ -393,34 +452,37 @@ def _save(figure: Any, path: Path) -> str:
     return str(path)
 
 
-def _attach(
-    url: str,
-    name: str,
-    problem: CalibrationProblem,
-    curves: np.ndarray,
-    residual: np.ndarray,
-    tests: list[dict[str, Any]],
-    result: CompareResult,
-    stored: Mapping[str, Any] | None,
-) -> None:
+def _attach(found: Comparison, result: CompareResult) -> None:
     """The same figures as plotly objects on the calibration study (optuna-dashboard);
     the note keeps the calibration's own statement above the comparison."""
     try:
-        import plotly.graph_objects as go
         from optuna_dashboard import save_note, save_plotly_graph_object
+
+        figures = comparison_figures(found)
     except ImportError:
         return
     quiet_optuna()
-    study = optuna.create_study(study_name=name, storage=url, load_if_exists=True)
-    figure = _curves_plotly(go, problem, curves)
-    save_plotly_graph_object(study, figure, graph_object_id="compare-curves")
-    figure = _residual_plotly(go, problem, residual)
-    save_plotly_graph_object(study, figure, graph_object_id="compare-residual-angle")
+    study = optuna.create_study(study_name=result.study, storage=found.storage, load_if_exists=True)
+    for graph_id, figure in figures.items():
+        save_plotly_graph_object(study, figure, graph_object_id=graph_id)
+    save_note(study, "\n".join(_note_lines(result.tests, result, found.stored)))
+
+
+def comparison_figures(found: Comparison) -> dict[str, Any]:
+    """Plotly figures of a comparison by id: the measured and model curves, the residual
+    against the angle, and (when the tests record any) the tests' mean residual against
+    each condition and covariate. Raises ImportError without plotly."""
+    import plotly.graph_objects as go
+
+    problem = found.problem
+    figures = {
+        "compare-curves": _curves_plotly(go, problem, found.curves),
+        "compare-residual-angle": _residual_plotly(go, problem, found.residual),
+    }
     columns = [*problem.data.conditions, *problem.data.covariates]
     if columns:
-        figure = _covariates_plotly(go, columns, tests)
-        save_plotly_graph_object(study, figure, graph_object_id="compare-residual-covariates")
-    save_note(study, "\n".join(_note_lines(tests, result, stored)))
+        figures["compare-residual-covariates"] = _covariates_plotly(go, columns, found.result.tests)
+    return figures
 
 
 def _curves_plotly(go: Any, problem: CalibrationProblem, curves: np.ndarray) -> Any:

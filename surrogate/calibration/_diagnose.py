@@ -38,6 +38,7 @@ The statistics (F-tests, the regressions, the verdict rules) are
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 from collections.abc import Sequence
@@ -53,6 +54,7 @@ from .._log import show_progress
 from .._pool import check_jobs, imap_unordered, worker_count
 from ..effects import available_effects, get_effect
 from ..storage._optuna import quiet_optuna
+from ..storage._storage import open_storage
 from ._compare import BANDS, angle_bands
 from ._local import ResidualModel, SolverFailed, local_fit
 from ._loop import SolverRuns, calibrate, calibration_note
@@ -75,7 +77,7 @@ from ._statistics import (
     verdict,
 )
 
-__all__ = ["DiagnosisResult", "diagnose", "model_ladder", "write_ladder_plot"]
+__all__ = ["DiagnosisResult", "diagnose", "ladder_figure", "model_ladder", "write_ladder_plot"]
 
 _LOCAL_EVALS = 40  # residual evaluations of one local refit (each G solver runs)
 LOO_PRIOR_UNIT = 0.05  # prior SD of a parameter in the held-out refits, fraction of its range
@@ -370,27 +372,17 @@ class _Refits:
 def _attach_ladder(
     url: str, name: str, result: DiagnosisResult, calibration: dict[str, Any]
 ) -> None:
-    """The ladder and the verdict on the calibration study, for optuna-dashboard (below
-    the calibration's own statement)."""
+    """The diagnosis as the calibration study's attribute ``diagnosis`` (its ``--json``
+    record); the ladder and the verdict for optuna-dashboard (below the calibration's
+    own statement)."""
+    study = optuna.load_study(study_name=name, storage=open_storage(url))
+    study.set_user_attr("diagnosis", json.loads(json.dumps(result.to_json())))
     try:
-        import plotly.graph_objects as go
         from optuna_dashboard import save_note, save_plotly_graph_object
+
+        figure = ladder_figure(result.ladder, result.noise_n)
     except ImportError:
         return
-    study = optuna.load_study(study_name=name, storage=url)
-    ladder = result.ladder
-    figure = go.Figure()
-    models = [s["model"] for s in ladder]
-    figure.add_trace(go.Scatter(x=models, y=[s["rmse_n"] for s in ladder], name="RMSE"))
-    figure.add_trace(
-        go.Scatter(x=models, y=[s["heldout_rmse_n"] for s in ladder], name="held-out RMSE")
-    )
-    figure.add_trace(
-        go.Scatter(x=models, y=[result.noise_n] * len(ladder), name="noise", mode="lines")
-    )
-    figure.update_layout(
-        title="Model ladder", yaxis_title="error [N]", yaxis_type="log", xaxis_title="model"
-    )
     save_plotly_graph_object(study, figure, graph_object_id="model-ladder")
     rows = [
         f"| {e['effect']} | {e['rmse_n']:.4g} | {e['heldout_rmse_n']:.4g} | {e['delta_bic']:.1f} |"
@@ -410,6 +402,24 @@ def _attach_ladder(
             ]
         ),
     )
+
+
+def ladder_figure(ladder: Sequence[dict[str, Any]], noise_n: float) -> Any:
+    """The model ladder as a plotly figure: RMSE and held-out RMSE of each model
+    against the noise. Raises ImportError without plotly."""
+    import plotly.graph_objects as go
+
+    figure = go.Figure()
+    models = [s["model"] for s in ladder]
+    figure.add_trace(go.Scatter(x=models, y=[s["rmse_n"] for s in ladder], name="RMSE"))
+    figure.add_trace(
+        go.Scatter(x=models, y=[s["heldout_rmse_n"] for s in ladder], name="held-out RMSE")
+    )
+    figure.add_trace(go.Scatter(x=models, y=[noise_n] * len(ladder), name="noise", mode="lines"))
+    figure.update_layout(
+        title="Model ladder", yaxis_title="error [N]", yaxis_type="log", xaxis_title="model"
+    )
+    return figure
 
 
 class _Say:
@@ -573,17 +583,19 @@ def _start(problem: CalibrationProblem, params: dict[str, float]) -> np.ndarray:
 def _record_heldout(url: str, name: str, heldout: float) -> None:
     quiet_optuna()
     try:
-        study = optuna.load_study(study_name=name, storage=url)
+        study = optuna.load_study(study_name=name, storage=open_storage(url))
     except KeyError:
         return
     study.set_user_attr("heldout_rmse_n", heldout)
 
 
-def model_ladder(url: str, name: str) -> list[dict[str, Any]]:
-    """Every calibration of the study, as steps of the model ladder (fewest effects first)."""
+def model_ladder(url: str | optuna.storages.BaseStorage, name: str) -> list[dict[str, Any]]:
+    """Every calibration of the study, as steps of the model ladder (fewest effects first);
+    ``url`` a storage URL or an opened storage."""
     prefix = f"{name}/calibrate/"
     steps = []
-    for summary in optuna.get_all_study_summaries(storage=url, include_best_trial=False):
+    storage = open_storage(url) if isinstance(url, str) else url
+    for summary in optuna.get_all_study_summaries(storage=storage, include_best_trial=False):
         if not summary.study_name.startswith(prefix):
             continue
         result = summary.user_attrs.get("result")

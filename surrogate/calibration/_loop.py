@@ -45,6 +45,7 @@ from ..gp import CurveSurrogate
 from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..storage._optuna import distributions, quiet_optuna
+from ..storage._storage import open_storage
 from ..study._spec import StudySpec
 from ._determination import determine
 from ._local import (
@@ -683,7 +684,7 @@ def _record(
 ) -> None:
     """Verifications as trials of the study ``name``; the result as a study attribute."""
     quiet_optuna()
-    study = optuna.create_study(study_name=name, storage=url, load_if_exists=True)
+    study = optuna.create_study(study_name=name, storage=open_storage(url), load_if_exists=True)
     known = {
         t.user_attrs.get("verification_key")
         for t in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))

@@ -329,13 +329,14 @@ def _load(spec: StudySpec, url: str, suffix: str, command: str) -> tuple[Any, st
     import optuna
 
     from ..storage._optuna import quiet_optuna
+    from ..storage._storage import open_storage
 
     quiet_optuna()
     name = f"{spec.name}/{suffix}"
     if url.startswith("sqlite:///") and not Path(url.removeprefix("sqlite:///")).exists():
         raise InputDataError(f"storage {url} does not exist; run `{command}` first")
     try:
-        return optuna.load_study(study_name=name, storage=url), name
+        return optuna.load_study(study_name=name, storage=open_storage(url)), name
     except KeyError:
         raise InputDataError(
             f"no study {name!r} in {url}; run `{command}` on the study file first"

@@ -27,7 +27,7 @@ if TYPE_CHECKING:
 
     from ..study import SampleSet
 
-__all__ = ["evaluate_design", "solve_inputs", "solver_inputs"]
+__all__ = ["evaluate_design", "solve_inputs", "solver_inputs", "solver_version"]
 
 
 def solver_inputs(
@@ -49,7 +49,7 @@ def solver_inputs(
     (only when there are any); those that can change the result enter the hash
     (:func:`surrogate.solvers._base.run_identity`).
     """
-    version = _solver_version(solver)  # an unknown kind: the registry's one-line error
+    version = solver_version(solver)  # an unknown kind: the registry's one-line error
     missing = [name for name in COATING_PARAMETERS if name not in point]
     if missing:
         raise InputDataError(
@@ -74,7 +74,9 @@ def solver_inputs(
     return inputs
 
 
-def _solver_version(solver: str) -> str:
+def solver_version(solver: str) -> str:
+    """The version of solver ``solver`` that names its runs (a solver without one: the
+    built-in rod's)."""
     return get_solver(solver).version or SOLVER_VERSION
 
 
@@ -124,7 +126,7 @@ def evaluate_design(
     _solve_missing(inputs, keys, results, cache=cache, solve=solve, jobs=jobs, progress=progress)
     provenance = {
         "solver": solver,
-        "solver_version": _solver_version(solver),
+        "solver_version": solver_version(solver),
         "rig": rig.to_dict(),
         "solver_calls": calls,
         **(meta or {}),

@@ -3,7 +3,7 @@
 - :mod:`._storage`: storage URLs (SQLite, journal, PostgreSQL), heartbeats for many
   workers, one-line storage errors;
 - :mod:`._optuna`: a parameter space as Optuna distributions, and quiet Optuna;
-- :mod:`._dashboard`: figures and notes a study shows in optuna-dashboard;
+- :mod:`._dashboard`: figures, notes and files (artifacts) a study shows in optuna-dashboard;
 - :mod:`._serve`: ``dashboard`` (optuna-dashboard on 127.0.0.1 only).
 """
 

@@ -1,4 +1,8 @@
-"""``dashboard``: optuna-dashboard on a study's storage, on 127.0.0.1 only."""
+"""``dashboard``: optuna-dashboard on a study's storage, on 127.0.0.1 only.
+
+It serves the files attached to the study's studies (the report of ``surrogate
+report``) from the study's artifact folder (:func:`._dashboard.artifact_folder`).
+"""
 
 from __future__ import annotations
 
@@ -8,6 +12,7 @@ from pathlib import Path
 from .._errors import InputDataError
 from ..effects import check_effects
 from ..study._spec import StudySpec, load_study
+from ._dashboard import artifact_folder
 from ._storage import missing_local_storage, open_storage
 
 __all__ = ["dashboard"]
@@ -38,5 +43,9 @@ def dashboard(
         raise InputDataError(
             "optuna-dashboard is not installed; pip install 'webbing-surrogate[dashboard]'"
         ) from None
+    from optuna.artifacts import FileSystemArtifactStore
+
+    files = artifact_folder(spec.directory, spec.name)
+    files.mkdir(parents=True, exist_ok=True)
     print(f"optuna-dashboard for {url} on http://{HOST}:{port}/ (Ctrl-C to stop)", flush=True)
-    run_server(opened, host=HOST, port=port)
+    run_server(opened, host=HOST, port=port, artifact_store=FileSystemArtifactStore(files))

@@ -50,6 +50,7 @@ __all__ = [
     "check_workers",
     "normalise_storage_url",
     "open_storage",
+    "redacted_url",
     "storage_error_message",
     "storage_kind",
 ]
@@ -316,7 +317,7 @@ def storage_error_message(error: BaseException, url: str | None = None) -> str |
     """One line for a storage failure (unreachable, read-only, full), else None."""
     import sqlalchemy.exc
 
-    where = f" ({_redacted(url)})" if url else ""
+    where = f" ({redacted_url(url)})" if url else ""
     if isinstance(error, optuna.exceptions.StorageInternalError) and error.__cause__:
         error = error.__cause__  # Optuna wraps the database's own error
     if isinstance(error, sqlalchemy.exc.SQLAlchemyError):
@@ -339,8 +340,8 @@ def storage_error_message(error: BaseException, url: str | None = None) -> str |
     return None
 
 
-def _redacted(url: str) -> str:
-    """The URL without a password."""
+def redacted_url(url: str) -> str:
+    """The URL without a password (what a message or a report may show)."""
     head, sep, tail = url.partition("://")
     if sep and "@" in tail:
         credentials, _, host = tail.rpartition("@")

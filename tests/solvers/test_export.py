@@ -167,3 +167,15 @@ def test_a_calibrated_coat_is_evaluated_at_the_named_conditions(tmp_path, capsys
     payload = json.loads(capsys.readouterr().out)
     assert payload["parameters"]["ECOAT"] == pytest.approx(1000.0)
     assert payload["conditions"] == {"tension_n": 0.0}
+
+
+def test_export_reads_a_journal_storage(tmp_path):
+    """Any storage the workers use: journal:/// as well as SQLite and PostgreSQL."""
+    path = tmp_path / "coat.toml"
+    path.write_text('[study]\nname = "coat"\n[targets]\nf60_n = 9.958\n')
+    spec = load_study(path)
+    url = f"journal:///{tmp_path / 'verify.log'}"
+    verifier = Verifier(spec, open_verify_study(spec, url, heartbeat_s=None), progress=False)
+    verifier.verify([[OPTIMUM[n] for n in spec.space.names]], phase="test")
+    result = surrogate.export(path, storage=url)
+    assert result.parameters["TCOAT"] == pytest.approx(0.012) and result.storage == url

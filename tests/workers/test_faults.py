@@ -26,14 +26,13 @@ import collections
 import json
 import shutil
 import signal
-import subprocess
-import sys
 
 import optuna
 import pytest
 
 from tests.workers.fixed_cost import FixedCostSolve, events
-from tests.workers.test_workers import REPO, STUDIES, _trials, _wait_for
+from tests.workers.test_workers import STUDIES, _process, _trials, _wait_for
+from tests.workers.test_workers import _worker as worker_process
 
 pytestmark = pytest.mark.slow
 TrialState = optuna.trial.TrialState
@@ -54,47 +53,12 @@ def study_file(tmp_path):
 
 
 def _planner(study_file, storage_url):
-    return subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "surrogate",
-            "run",
-            str(study_file),
-            "--storage",
-            storage_url,
-            "--jobs",
-            "0",
-            "--json",
-        ],
-        cwd=REPO,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    return _process("surrogate", "run", study_file, "--storage", storage_url, "--jobs", 0, "--json")
 
 
 def _worker(study_file, storage_url, log, *options):
-    return subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "tests.workers.fixed_cost",
-            str(study_file),
-            storage_url,
-            str(log),
-            str(COST_S),
-            "1",
-            str(HEARTBEAT_S),
-            "--idle-timeout",
-            "60",
-            *options,
-        ],
-        cwd=REPO,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    options = (HEARTBEAT_S, "--idle-timeout", 60, *options)
+    return worker_process(study_file, storage_url, log, COST_S, options=options)
 
 
 def _kill(process):

@@ -46,22 +46,21 @@ def _plan(study_file, storage_url, n):
     return enqueue(study, spec, points, phase="plan")
 
 
-def _worker(study_file, storage_url, log, cost_s, *, jobs=1):
+def _process(*args):
+    """``python -m ARGS…`` from the repository, its output captured."""
     return subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "tests.workers.fixed_cost",
-            str(study_file),
-            storage_url,
-            str(log),
-            str(cost_s),
-            str(jobs),
-        ],
+        [sys.executable, "-m", *map(str, args)],
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+    )
+
+
+def _worker(study_file, storage_url, log, cost_s, *, jobs=1, options=()):
+    """A worker process with the fixed-cost solver (``tests/workers/fixed_cost.py``)."""
+    return _process(
+        "tests.workers.fixed_cost", study_file, storage_url, log, cost_s, jobs, *options
     )
 
 
