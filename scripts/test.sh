@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Set up (scripts/setup.sh, scripts/system-packages.sh) and run the whole test suite. Extra arguments go to pytest.
+# Set up (scripts/setup.sh, scripts/system-packages.sh) and run the whole test suite, one pytest
+# process a core (pytest-xdist). Extra arguments go to pytest (-n 0: one process).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 bash scripts/system-packages.sh   # PostgreSQL and Chromium for the system tests (root: installs)
-exec .venv/bin/python -m pytest -q "$@"
+exec .venv/bin/python -m pytest -q -n auto "$@"   # pytest-xdist: one process a core
