@@ -1,6 +1,17 @@
+import os
 from pathlib import Path
 
 import pytest
+from threadpoolctl import threadpool_limits
+
+# One BLAS thread a test process, and in the processes tests start: the suite runs one
+# pytest process a core (pytest-xdist), and on this product's small matrices a second
+# OpenBLAS thread only spins (test_diagnose's tension case, alone on the 2-core machine:
+# 49 s wall and 50 s CPU with one thread, 59 s and 95 s with two). The results do not
+# depend on it (tests/test_calibrate_sweep.py runs both thread counts on purpose).
+for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_variable, "1")
+threadpool_limits(1)
 
 REPO = Path(__file__).resolve().parents[1]
 # Verification tables live in the steering repo's shared/ folder beside this one;
