@@ -63,6 +63,7 @@ BASE_TESTS = [
 ]
 
 
+@pytest.mark.slow
 def test_base_model_on_base_data_recovers_the_identifiable_combination(tmp_path):
     path = _study(tmp_path, BASE_TESTS)
     result = surrogate.calibrate(path, progress=False)
@@ -87,6 +88,7 @@ def test_base_model_on_base_data_recovers_the_identifiable_combination(tmp_path)
     assert study.user_attrs["result"]["params"] == result.params
 
 
+@pytest.mark.slow
 def test_the_right_effect_recovers_its_parameter(tmp_path):
     hidden = {"tension": {"k_e": 0.006, "k_s": 0.006}}
     tests = [
@@ -120,6 +122,7 @@ def test_the_right_effect_recovers_its_parameter(tmp_path):
     )
 
 
+@pytest.mark.slow
 def test_cli_calibrate_json_then_compare(tmp_path, capsys):
     path = _study(tmp_path, BASE_TESTS[:2] + BASE_TESTS[2:3], budget=40)
     assert main(["calibrate", str(path), "--json"]) == 0
@@ -146,6 +149,7 @@ def test_cli_calibrate_json_then_compare(tmp_path, capsys):
         assert figure in attrs
 
 
+@pytest.mark.slow
 def test_compare_shows_where_the_base_model_fails(tmp_path):
     hidden = {"tension": {"k_e": 0.01, "k_s": 0.01}}
     tests = [

@@ -13,6 +13,8 @@ import surrogate
 from surrogate._cli import main
 from surrogate.calibration._synthetic import synthetic_measurements
 
+pytestmark = pytest.mark.slow  # calibrations and diagnoses: CI runs them, the dev loop not
+
 TRUTH = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
 NOISE = 0.05
 # tension and direction vary; temperature is a decoy column that does not matter

@@ -27,6 +27,8 @@ from surrogate.calibration._synthetic import (
 )
 from surrogate.effects import _base
 
+pytestmark = pytest.mark.slow  # diagnoses: CI runs them, the dev loop not
+
 TRUTH = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
 NOISE = 0.05
 DECOYS = ("temperature_c", "humidity_pct")

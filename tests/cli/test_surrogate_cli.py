@@ -8,6 +8,8 @@ import sys
 import pandas as pd
 import pytest
 
+pytestmark = pytest.mark.slow  # calibrations and diagnoses: CI runs them, the dev loop not
+
 
 def _run(*args, cwd):
     return subprocess.run(

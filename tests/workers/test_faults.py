@@ -36,7 +36,7 @@ from tests.workers.test_workers import _worker as worker_process
 
 pytestmark = pytest.mark.slow
 TrialState = optuna.trial.TrialState
-COST_S = 2.0
+COST_S = 1.0
 HEARTBEAT_S = 1
 
 
