@@ -171,3 +171,29 @@ def test_run_needs_a_scalar_target(tmp_path):
     path.write_text('[study]\nname = "m"\n[measurements]\nfile = "m.csv"\n')
     with pytest.raises(InputDataError, match="needs \\[targets\\] f60_n"):
         run(path, progress=False)
+
+
+def test_a_point_queued_by_a_killed_worker_planner_is_solved_into_its_own_trial(
+    study_file, monkeypatch
+):
+    """A `run --jobs 4` planner killed with runs queued, then `run` in one process: each
+    result lands in the trial of its own input hash, none in another queued one."""
+    from surrogate.identify._verify import Verifier, enqueue, open_verify_study
+
+    spec = load_study(study_file)
+    study = open_verify_study(spec, spec.default_storage(), heartbeat_s=None)
+    points = [
+        {"ecoat_gpa": 1.0, "scoat_gpa": 0.2, "tcoat_mm": 0.012},
+        {"ecoat_gpa": 2.0, "scoat_gpa": 0.2, "tcoat_mm": 0.012},
+    ]
+    keys = enqueue(study, spec, points, phase="iteration 1")  # left WAITING by the dead planner
+    verifier = Verifier(spec, study, progress=False, replay=True)
+    record = verifier.solve(points[1], phase="iteration 1")  # the second point first
+    trials = {t.user_attrs["input_hash"]: t for t in study.get_trials(deepcopy=False)}
+    assert len(trials) == 2  # no new trial: the queued one was claimed
+    done = trials[keys[1]]
+    assert done.state == optuna.trial.TrialState.COMPLETE
+    assert done.params == pytest.approx(points[1])
+    assert done.user_attrs["f60_n"] == pytest.approx(record.f60_n)
+    assert record.f60_n == pytest.approx(surrogate.simulate(**points[1]).f60_n)
+    assert trials[keys[0]].state == optuna.trial.TrialState.WAITING

@@ -109,6 +109,7 @@ def run(
     )
     iterations = _search_and_verify(spec, verifier)
     calls_to_verify = verifier.calls if verifier.chosen() is not None else None
+    verifier.finish()
     return _result(spec, verifier, storage_url, iterations, calls_to_verify)
 
 

@@ -19,6 +19,9 @@ values (``≤ 0`` feasible), F60, θsat and the curve.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
 import logging
 import math
 from collections.abc import Callable, Iterable, Mapping
@@ -34,7 +37,7 @@ from .._errors import InputDataError
 from ..solvers._base import result_settings
 from ..solvers._batch import solve_inputs, solver_inputs
 from ..solvers._cache import ResultCache, input_hash
-from ..storage._optuna import distributions, quiet_optuna
+from ..storage._optuna import quiet_optuna, suggest
 from ..storage._storage import MAX_RETRY, open_storage, storage_errors
 from ..study._samples import SampleSet
 from ..study._spec import StudySpec, Targets
@@ -106,8 +109,28 @@ def plan_of(spec: StudySpec) -> str:
 
     A planner started again on the same storage with the same plan replays it
     (:class:`Verifier`); runs of another plan are training data from the start.
+    The space, the constraints, the preferences and the ``[budget]`` keys but the run
+    limit are part of it (hashed), as they change the decisions.
     """
-    return f"seed {spec.seed}, target F60 {target_of(spec):g} N ± {spec.targets.tolerance:g}"
+    drivers = json.dumps(
+        [
+            spec.space.to_dict(),
+            {  # the run limit only says where the replay stops
+                key: value
+                for key, value in dataclasses.asdict(spec.budget).items()
+                if key != "max_solver_calls"
+            },
+            list(spec.preference_order),
+            dataclasses.asdict(spec.constraints),
+        ],
+        sort_keys=True,
+        default=str,
+    )
+    digest = hashlib.sha256(drivers.encode()).hexdigest()[:12]
+    return (
+        f"seed {spec.seed}, target F60 {target_of(spec):g} N ± {spec.targets.tolerance:g}, "
+        f"space/budget/preferences {digest}"
+    )
 
 
 def verification_inputs(spec: StudySpec, params: Mapping[str, float]) -> dict[str, Any]:
@@ -342,18 +365,34 @@ class Verifier:
         self.records: dict[str, Verification] = {}
         self._replay: dict[str, Verification] = {}  # this plan's finished runs, not reached yet
         self._queued: dict[str, list[dict[str, float]]] = {}  # this plan's points by phase
-        plan = plan_of(spec)
+        plan = plan_of(spec) if replay else None
+        mine: set[str] = set()
         for trial in study.get_trials(deepcopy=False):
             key, attrs = trial.user_attrs.get("input_hash"), trial.user_attrs
-            if key is None:
-                continue
-            if attrs.get("plan") == plan:  # queued (WAITING) trials hold the point apart
-                point = trial.params or trial.system_attrs.get("fixed_params", {})
+            if key is not None and plan is not None and attrs.get("plan") == plan:
+                mine.add(key)  # a queued point is held apart from the params until claimed
+                point = trial.system_attrs.get("fixed_params") or trial.params
                 self._queued.setdefault(attrs.get("phase", ""), []).append(dict(point))
-            # a FAIL without a reason is an interrupted worker's run; its retry counts
-            if trial.state == TrialState.COMPLETE or "reason" in attrs:
-                known = self._replay if replay and attrs.get("plan") == plan else self.records
-                known[key] = record_of(trial)
+        keys = {t.user_attrs.get("input_hash") for t in study.get_trials(deepcopy=False)}
+        for key, record in finished_records(study, keys - {None}).items():
+            known = self._replay if key in mine else self.records
+            known[key] = self._rescored(record)
+
+    def _rescored(self, record: Verification) -> Verification:
+        """A stored run judged against this study's target and constraints (a run of
+        an earlier target keeps its F60, not its misfit)."""
+        if not record.ok or self.spec.targets.f60_n is None:
+            return record
+        return replace(
+            record,
+            misfit=relative_misfit(record.f60_n, target_of(self.spec)),
+            constraints=constraint_values(record.params, record.theta_sat_deg, self.spec),
+        )
+
+    def finish(self) -> None:
+        """Count this plan's finished runs the loop did not reach (a smaller budget)."""
+        self.records.update(self._replay)
+        self._replay.clear()
 
     @property
     def calls(self) -> int:
@@ -433,12 +472,25 @@ class Verifier:
     def _tell(
         self, params: dict[str, float], key: str, result: dict[str, Any], phase: str
     ) -> Verification:
-        # queued with its hash and phase, as enqueue() queues a worker's trial
-        self.study.enqueue_trial(
-            params, user_attrs=_trial_attrs(self.spec, key, phase), skip_if_exists=False
-        )
-        trial = self.study.ask(distributions(self.spec.space))
+        # queued with its hash and phase (as enqueue() queues a worker's trial), unless an
+        # earlier planner queued it; claimed by its id, never by ask() (the oldest WAITING)
+        if self._waiting(key) is None:
+            self.study.enqueue_trial(
+                params, user_attrs=_trial_attrs(self.spec, key, phase), skip_if_exists=False
+            )
+        trial_id = self._waiting(key)
+        assert trial_id is not None
+        storage = self.study._storage
+        storage.set_trial_state_values(trial_id, state=TrialState.RUNNING)
+        trial = optuna.Trial(self.study, trial_id)
+        suggest(trial, self.spec.space)
         return tell_verification(self.study, trial, self.spec, params, result)
+
+    def _waiting(self, key: str) -> int | None:
+        for trial in self.study.get_trials(deepcopy=False, states=(TrialState.WAITING,)):
+            if trial.user_attrs.get("input_hash") == key:
+                return trial._trial_id
+        return None
 
     def meeting(self) -> list[Verification]:
         tolerance = self.spec.targets.tolerance

@@ -16,6 +16,7 @@ without a shell from an argument list, and are killed at their timeout.
 
 from __future__ import annotations
 
+import functools
 import os
 import shlex
 import shutil
@@ -227,7 +228,7 @@ def run_command(
         raise SolverError(f"{args[0]}: command not found; install it or set its path")
     try:
         return subprocess.run(
-            [*_DIE_WITH_PARENT, program, *args[1:]],
+            [*_die_with_parent(), program, *args[1:]],
             cwd=cwd,
             env={**os.environ, **(env or {})},
             capture_output=True,
@@ -242,18 +243,24 @@ def run_command(
 
 def _program(name: str, cwd: Path, env: Mapping[str, str] | None) -> str | None:
     """The executable ``name`` runs: a path (relative to ``cwd``) or found on PATH."""
-    if os.sep in name:
+    if "/" in name or os.sep in name:
         path = Path(cwd, name)
         return str(path) if path.is_file() and os.access(path, os.X_OK) else None
     return shutil.which(name, path={**os.environ, **(env or {})}.get("PATH", os.defpath))
 
 
+@functools.cache
 def _die_with_parent() -> tuple[str, ...]:
-    setpriv = shutil.which("setpriv")  # util-linux, on every Debian
-    return (setpriv, "--pdeathsig", "KILL", "--") if setpriv else ()
-
-
-_DIE_WITH_PARENT = _die_with_parent()
+    """``setpriv --pdeathsig KILL --`` where it works (util-linux ≥ 2.33), else nothing."""
+    setpriv = shutil.which("setpriv")
+    if setpriv is None:
+        return ()
+    prefix = (setpriv, "--pdeathsig", "KILL", "--")
+    try:
+        works = subprocess.run([*prefix, "true"], capture_output=True, timeout=10).returncode == 0
+    except (OSError, subprocess.TimeoutExpired):
+        works = False
+    return prefix if works else ()
 
 
 def guarded(solve: Callable[[], dict[str, Any]]) -> dict[str, Any]:

@@ -76,26 +76,41 @@ def _first_start_by(log, workers):
 
 
 def test_killed_workers_and_planner_repeat_no_run_and_lose_none(study_file, storage_url, tmp_path):
+    processes = []
+    try:
+        _the_fault_test(study_file, storage_url, tmp_path, processes)
+    finally:  # a failed assertion leaves nothing running (a paused worker sleeps an hour)
+        for process in processes:
+            if process.poll() is None:
+                process.kill()
+                process.wait(timeout=30)
+
+
+def _the_fault_test(study_file, storage_url, tmp_path, processes):
     log = tmp_path / "solver.log"
     marker = tmp_path / "claimed"
-    planner = _planner(study_file, storage_url)
-    _wait_for(lambda: _has_study(study_file, storage_url), timeout=120)
-    paused = _worker(study_file, storage_url, log, "--pause-at-first-heartbeat", marker)
-    workers = [_worker(study_file, storage_url, log) for _ in range(3)]
+
+    def start(process):
+        processes.append(process)
+        return process
+
+    planner = start(_planner(study_file, storage_url))
+    _wait_for(lambda: _has_study(study_file, storage_url), timeout=120, every=0.5)
+    paused = start(_worker(study_file, storage_url, log, "--pause-at-first-heartbeat", marker))
+    workers = [start(_worker(study_file, storage_url, log)) for _ in range(3)]
 
     mid_solve = _wait_for(lambda: _first_start_by(log, workers), timeout=120)
     _kill(mid_solve)
     workers.remove(mid_solve)
-    workers.append(_worker(study_file, storage_url, log))
+    workers.append(start(_worker(study_file, storage_url, log)))
 
-    trial_id, _ = _wait_for(lambda: marker.exists() and marker.read_text().split(), 120)
-    stuck = _trial_state(study_file, storage_url, int(trial_id))
-    _kill(paused)
-    workers.append(_worker(study_file, storage_url, log))
+    trial_id, paused_pid = _wait_for(lambda: marker.exists() and marker.read_text().split(), 120)
+    _kill(paused)  # stopped between its claim and the claim's first heartbeat
+    workers.append(start(_worker(study_file, storage_url, log)))
 
-    _wait_for(lambda: _phases(study_file, storage_url) & {"iteration 1"}, timeout=240)
+    _wait_for(lambda: _phases(study_file, storage_url) & {"iteration 1"}, timeout=240, every=0.5)
     _kill(planner)
-    planner = _planner(study_file, storage_url)
+    planner = start(_planner(study_file, storage_url))
     stdout, stderr = planner.communicate(timeout=400)
     assert planner.returncode == 0, stderr
     result = json.loads(stdout)
@@ -121,7 +136,11 @@ def test_killed_workers_and_planner_repeat_no_run_and_lose_none(study_file, stor
         f"waiting, {len(starts)} solver starts (1 killed mid-solve), planner: "
         f"{result['status']} after {result['solver_calls']} runs"
     )
-    assert stuck == TrialState.RUNNING  # the window was hit: claimed, no heartbeat
+    # the trial claimed without a heartbeat was failed (never solved by its worker) and redone
+    (claimed,) = [t for t in trials if t._trial_id == int(trial_id)]
+    assert claimed.state == TrialState.FAIL and "reason" not in claimed.user_attrs
+    assert not [pid for event, _, pid in events(log) if pid == int(paused_pid)]
+    assert len(finished[claimed.user_attrs["input_hash"]]) == 1
     assert all(len(group) == 1 for group in finished.values()), finished
     assert not open_trials
     assert len(starts) == len(by_hash) + 1
@@ -159,10 +178,3 @@ def _has_study(study_file, storage_url):
 
 def _phases(study_file, storage_url):
     return {t.user_attrs.get("phase") for t in _trials(study_file, storage_url)}
-
-
-def _trial_state(study_file, storage_url, trial_id):
-    for trial in _trials(study_file, storage_url):
-        if trial._trial_id == trial_id:
-            return trial.state
-    raise AssertionError(f"no trial {trial_id}")

@@ -76,13 +76,13 @@ def _wait_all(processes, timeout=120):
         assert process.returncode == 0, stderr
 
 
-def _wait_for(condition, timeout=60):
+def _wait_for(condition, timeout=60, every=0.05):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         found = condition()
         if found:
             return found
-        time.sleep(0.05)
+        time.sleep(every)
     raise AssertionError("timed out")
 
 
