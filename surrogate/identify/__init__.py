@@ -16,10 +16,25 @@ The flow, one module a step:
 - :mod:`._export`: the verified optimum as an LS-DYNA card.
 """
 
-from ._commands import DoeResult, FitResult, PredictResult, doe, fit, predict
-from ._export import ExportResult, export
-from ._loop import RunResult, run
-from ._worker import WorkerResult, work
+from importlib import import_module
+from typing import Any
+
+# The commands load on first use (scikit-learn, Optuna and pandas are slow to import), so
+# the CLI's parser and ``surrogate simulate`` do not pay for them.
+_LAZY = {
+    "DoeResult": "._commands",
+    "FitResult": "._commands",
+    "PredictResult": "._commands",
+    "doe": "._commands",
+    "fit": "._commands",
+    "predict": "._commands",
+    "ExportResult": "._export",
+    "export": "._export",
+    "RunResult": "._loop",
+    "run": "._loop",
+    "WorkerResult": "._worker",
+    "work": "._worker",
+}
 
 __all__ = [
     "DoeResult",
@@ -35,3 +50,15 @@ __all__ = [
     "run",
     "work",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        value = getattr(import_module(_LAZY[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

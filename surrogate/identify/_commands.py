@@ -158,8 +158,12 @@ def _read_design(points_file: str | Path, space: ParameterSpace) -> pd.DataFrame
     return points
 
 
-def fit_surrogate(samples: SampleSet, *, seed: int = 0) -> CoatingSurrogate:
-    """A :class:`CoatingSurrogate` of the successful runs of ``samples``."""
+def fit_surrogate(
+    samples: SampleSet, *, seed: int = 0, with_curves: bool = True
+) -> CoatingSurrogate:
+    """A :class:`CoatingSurrogate` of the successful runs of ``samples``; its curve part
+    only ``with_curves`` (the main loop's search reads F60 and θsat alone, and the
+    curve's GPs, fitted independently, cost it two thirds of a fit)."""
     ok = samples.ok
     if len(ok) < 3:
         raise InputDataError(
@@ -167,7 +171,7 @@ def fit_surrogate(samples: SampleSet, *, seed: int = 0) -> CoatingSurrogate:
         )
     X = ok[list(samples.space.names)].to_numpy(dtype=float)
     curves = angles = None
-    if len(samples.curves):
+    if with_curves and len(samples.curves):
         angles, curves = samples.curve_matrix(ok["run_id"].to_numpy())
     max_angle = float(angles[-1]) if angles is not None else 90.0
     return CoatingSurrogate(samples.space, seed=seed, max_angle_deg=max_angle).fit(

@@ -121,7 +121,7 @@ def _search_and_verify(spec: StudySpec, verifier: Verifier) -> int:
     iteration = 0
     while verifier.chosen() is None and verifier.calls < spec.budget.max_solver_calls:
         iteration += 1
-        model = fit_surrogate(verifier.sample_set(), seed=spec.seed)
+        model = fit_surrogate(verifier.sample_set(), seed=spec.seed, with_curves=False)
         room = spec.budget.max_solver_calls - verifier.calls
         candidates = _propose(
             model,
@@ -294,7 +294,7 @@ def _result(
     n_ok = sum(r.ok for r in verifier.records.values())
     if point is not None and n_ok >= 3:
         # refit on every verified run, the last candidates included
-        model = fit_surrogate(verifier.sample_set(), seed=spec.seed)
+        model = fit_surrogate(verifier.sample_set(), seed=spec.seed, with_curves=False)
         good = _equally_good(model, spec, verifier, iterations)
         if chosen is None and len(good) == 0:
             identifiability = {
