@@ -458,7 +458,7 @@ def _add_calibrate(commands: _Subparsers) -> argparse.ArgumentParser:
 
 
 def _calibrate(args: argparse.Namespace) -> int:
-    from .calibration._loop import calibrate
+    from .calibration._calibrate import calibrate
 
     result = calibrate(  # validates --jobs and --budget (the API refuses what the CLI does)
         args.study,

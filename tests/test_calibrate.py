@@ -249,7 +249,8 @@ def test_compare_refuses_params_outside_the_ranges_or_incomplete(tmp_path):
 
 def test_model_state_surrogate_inputs_follow_the_effects(tmp_path):
     """The surrogate sees what the solver sees: a tension effect is a stiffer coat."""
-    from surrogate.calibration._problem import CalibrationProblem, state_features
+    from surrogate.calibration._problem import CalibrationProblem
+    from surrogate.solvers import state_features
     from surrogate.study._measurements import load_measurements
     from surrogate.study._spec import load_study
 

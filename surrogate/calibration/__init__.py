@@ -6,11 +6,16 @@ The rooms, in the order the data flow through them:
   ``effect.param``), condition groups, measured points, the misfit; what the solver
   sees of a test as surrogate inputs; the study's measurements and noise level; the
   checks of the commands' options.
-- ``_loop`` — ``calibrate``: the global phase (a curve surrogate, :mod:`surrogate.gp`,
-  searched with Optuna, candidates verified by the full solver), then the local
-  phase; the verifications recorded as trials of ``<name>/calibrate/<model>``.
+- ``_loop`` — the calibration's loop: the global phase (a curve surrogate,
+  :mod:`surrogate.gp`, searched with Optuna, candidates verified by the full solver),
+  then the local phase.
 - ``_local`` — the local phase: bounded trust-region least squares with the full
   solver and its first-order test (shared by ``calibrate`` and ``diagnose``).
+- ``_fidelity`` — with an external full solver, the same loop on the built-in solver
+  corrected towards it, the expensive solver verifying its optimum and teaching the
+  correction until a verified point is a local optimum of the corrected model.
+- ``_calibrate`` — ``calibrate``: the loop run, its best verified point judged, the
+  verifications recorded as trials of ``<name>/calibrate/<model>``.
 - ``_determination`` — what the curves determine at a calibrated point (95 %
   intervals of D, Mp and each parameter; pure numerics).
 - ``_compare`` — ``compare``: measured against model curves, per test, angle band
@@ -22,9 +27,9 @@ The rooms, in the order the data flow through them:
 - ``_synthetic`` — synthetic measured curves for tests, benchmarks and demos.
 """
 
+from ._calibrate import CalibrationResult, calibrate
 from ._compare import CompareResult, compare
 from ._diagnose import DiagnosisResult, diagnose
-from ._loop import CalibrationResult, calibrate
 
 __all__ = [
     "CalibrationResult",

@@ -29,7 +29,8 @@ from .._errors import InputDataError, SolverError
 from .._log import show_progress
 from ..physics import curve_features
 from ..storage._optuna import quiet_optuna
-from ._loop import SolverRuns, calibration_note
+from ._calibrate import calibration_note
+from ._loop import SolverRuns
 from ._problem import CalibrationProblem, calibration_study_name, load_calibration, model_label
 from ._statistics import column_values
 

@@ -55,9 +55,10 @@ from .._pool import check_jobs, imap_unordered, worker_count
 from ..effects import available_effects, get_effect
 from ..storage._optuna import quiet_optuna
 from ..storage._storage import open_storage
+from ._calibrate import calibrate, calibration_note
 from ._compare import BANDS, angle_bands
 from ._local import ResidualModel, SolverFailed, local_fit
-from ._loop import SolverRuns, calibrate, calibration_note
+from ._loop import SolverRuns
 from ._problem import (
     CalibrationProblem,
     calibration_study_name,

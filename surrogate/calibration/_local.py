@@ -50,6 +50,7 @@ __all__ = [
     "SolverFailed",
     "gauss_newton_step",
     "local_fit",
+    "optimum_test",
 ]
 
 FD_STEP_UNIT = 1e-3  # 0.1 % of a range: far above the solver's 1e-9 Newton tolerance
@@ -360,6 +361,19 @@ def local_fit(
         x, reason = best, f"budget spent ({spent})"
         active = np.zeros(x.size, dtype=int)
     return _result(model, x, active, None, reason)
+
+
+def optimum_test(model: ResidualModel, theta: np.ndarray) -> LocalFit:
+    """The first-order test at ``theta`` itself, without moving: a :class:`LocalFit` at
+    ``theta`` (``converged`` where the test holds). Raises :class:`SolverFailed` if the
+    solver fails at ``theta``."""
+    x = model.pin(theta)
+    if model.evaluate(x)[1] is None:
+        raise SolverFailed(model.runs.failures[-1] if model.runs.failures else "solver failed")
+    test = _first_order_test(model, x)
+    return _result(
+        model, x, np.zeros(x.size, dtype=int), test if test.holds else None, test.message
+    )
 
 
 @dataclass(frozen=True)

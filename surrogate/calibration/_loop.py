@@ -1,4 +1,4 @@
-"""``calibrate``: fit the coating and the enabled effects to measured curves.
+"""The calibration's loop: the machinery of ``calibrate`` (the command is :mod:`._calibrate`'s).
 
 The machinery of the main loop, over parameters × test conditions (the problem —
 condition groups, measured points, misfit — is :mod:`._problem`'s):
@@ -11,8 +11,8 @@ condition groups, measured points, misfit — is :mod:`._problem`'s):
    (:class:`~surrogate.gp.CurveSurrogate` on the problem's model-state features),
    an Optuna TPE search of the predicted RMSE, polished by L-BFGS-B on the surrogate;
 4. the candidate is verified with the full solver at every condition group
-   (a trial of the study ``<name>/calibrate/<model>``, value: the RMSE over all
-   measured points), its runs join the training set, and the loop repeats
+   (:class:`VerifiedPoint`, which ``calibrate`` records as a trial of
+   ``<name>/calibrate/<model>``), its runs join the training set, and the loop repeats
    until a verification no longer improves on the best one and agrees with
    its prediction, or the budget is spent;
 5. the local phase (:mod:`._local`) finishes from the best verified point, until
@@ -24,11 +24,9 @@ solver's on whole degrees, interpolated to the measured angles.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,15 +36,11 @@ from optuna.distributions import BaseDistribution
 from scipy.optimize import minimize
 from scipy.stats import qmc
 
-from .._errors import InputDataError
-from .._log import show_progress
-from .._pool import check_jobs, imap_unordered
+from .._pool import imap_unordered
 from ..gp import CurveSurrogate
 from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..storage._optuna import distributions, quiet_optuna
-from ..storage._storage import open_storage
-from ..study._spec import StudySpec
 from ._determination import determine
 from ._local import (
     FIRST_ORDER_BOX,
@@ -56,24 +50,15 @@ from ._local import (
     SolverFailed,
     local_fit,
 )
-from ._problem import (
-    CalibrationProblem,
-    calibration_study_name,
-    check_budget,
-    coat_section,
-    load_calibration,
-    model_label,
-)
-from ._statistics import SIGNIFICANCE, misfit_p_value, noise_dof
+from ._problem import CalibrationProblem, coat_section
+from ._statistics import misfit_p_value, noise_dof
 
 __all__ = [
-    "CalibrationResult",
+    "CalibrationLoop",
     "SolverRun",
     "SolverRuns",
     "VerifiedPoint",
-    "calibrate",
-    "calibration_note",
-    "data_hash",
+    "determination_at",
 ]
 
 _SEARCH_BATCH = 25
@@ -86,51 +71,6 @@ VALLEY_RMSE = 1.5  # …if within this many times the noise (beyond, the model i
 VALLEY_STEP = 0.25  # the valley starts: a quarter of a range along the least determined direction
 
 _LOG = logging.getLogger(__name__)
-
-
-# -- the result --------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class CalibrationResult:
-    """Keys of ``surrogate calibrate --json``.
-
-    ``params`` are the calibrated values (coating in the paper's units, effect
-    parameters as ``effect.param``); ``rmse_n`` the RMSE over all measured
-    points, verified by the full solver; ``solver_calls`` the full-solver runs
-    this calibration used (a run already in the result cache is not repeated).
-
-    ``status`` is ``converged`` only when the local phase's first-order test held
-    at ``params`` (a verified point; see :mod:`surrogate.calibration._local`), else
-    ``budget_exhausted`` (``params`` is then the best verified point).
-    ``predicted_gain`` is what that test measured: the relative RMSE decrease the
-    Gauss–Newton model still promises within ±5 % of each range (``None`` unless
-    ``converged``). With
-    ``converged``: ``misfit`` is ``"within the noise"`` or ``"systematic"`` by the
-    F-test of the RSS against the noise (``misfit_p_value``; systematic below
-    0.01), and ``determination`` says what the curves determine (the keys of
-    :class:`~surrogate.calibration._determination.Determination`: 95 % intervals of the
-    bending stiffness ``bending_stiffness_nmm`` [N·mm per unit width], the plastic
-    moment ``plastic_moment_n`` [N·mm/mm = N] and each parameter, the free
-    parameters, those held at a bound). Both are ``None`` unless ``converged``.
-    """
-
-    params: dict[str, float]
-    rmse_n: float
-    noise_n: float
-    solver_calls: int
-    effects: list[str]
-    rmse_per_test_n: dict[str, float]
-    status: str
-    predicted_gain: float | None
-    misfit: str | None
-    misfit_p_value: float | None
-    determination: dict[str, Any] | None
-    iterations: int
-    study: str
-    storage: str
-    message: str
-
-    def to_json(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 # -- full-solver runs --------------------------------------------------------------------------
@@ -181,9 +121,17 @@ class SolverRuns:
     ) -> list[tuple[np.ndarray, int, dict[str, Any]]]:
         names = self.problem.space.names
         return [
-            (theta, g, self.problem.inputs(dict(zip(names, theta, strict=True)), g))
+            (theta, g, self.inputs(dict(zip(names, theta, strict=True)), g))
             for theta, g in zip(thetas, groups, strict=True)
         ]
+
+    def inputs(self, theta: Mapping[str, float], group: int) -> dict[str, Any]:
+        """The solver inputs of parameters ``theta`` at condition group ``group``."""
+        return self.problem.inputs(theta, group)
+
+    def curve(self, result: Mapping[str, Any], inputs: Mapping[str, Any]) -> np.ndarray:
+        """The curve [N] of a successful run on the problem's whole degrees."""
+        return np.interp(self.problem.angle_deg, result["angle_deg"], result["force_n"])
 
     def keys(self, thetas: np.ndarray, groups: Sequence[int]) -> list[str]:
         """The result-cache keys of these runs."""
@@ -206,7 +154,7 @@ class SolverRuns:
                 self.failures.append(result["reason"])
                 out.append(None)
                 continue
-            curve = np.interp(self.problem.angle_deg, result["angle_deg"], result["force_n"])
+            curve = self.curve(result, items[i][2])
             if (keys[i], g) not in self._seen:
                 self._seen.add((keys[i], g))
                 self.X.append(np.asarray(theta, float))
@@ -240,102 +188,8 @@ class SolverRuns:
         return len(self.used)
 
 
-# -- the command -------------------------------------------------------------------------------
-def calibrate(
-    study: str | Path | StudySpec,
-    *,
-    effects: Sequence[str] | None = None,
-    plugins: Sequence[str] = (),
-    storage: str | None = None,
-    max_solver_calls: int | None = None,
-    jobs: int = 1,
-    progress: bool = True,
-    tests: Sequence[Any] | None = None,
-    record: bool = True,
-) -> CalibrationResult:
-    """Calibrate the coating and the enabled effects against the measured curves.
-
-    Parameters
-    ----------
-    study : path or StudySpec
-        A study with a ``[measurements]`` file.
-    effects : sequence of str, optional
-        Effects to enable; default: the study's ``[model] effects``.
-    plugins : sequence of str
-        Modules of user effects to import first (``--plugin``).
-    storage : str, optional
-        Optuna storage URL; default: the study's.
-    max_solver_calls : int, optional
-        Budget of full-solver runs, ≥ 10 (default: ``[budget] calibration_solver_calls``).
-    jobs : int
-        Worker processes for the runs of one verification (≥ 1).
-    progress : bool
-        Log each step at INFO (logger ``surrogate``; on stderr unless configured).
-    tests : sequence, optional
-        Calibrate on these tests only (used by the diagnosis).
-    record : bool
-        Keep the verifications as trials of ``<name>/calibrate/<model>``.
-
-    Returns
-    -------
-    CalibrationResult
-    """
-    check_jobs(jobs)
-    check_budget(max_solver_calls)  # bad options fail before anything is read or written
-    if progress:
-        show_progress()
-    spec, data, chosen, noise = load_calibration(study, effects, plugins)
-    problem = CalibrationProblem(spec, data, chosen, tests=tests)
-    runs = SolverRuns(problem, spec.directory / ".solver-cache", jobs=jobs)
-    budget = max_solver_calls or spec.budget.calibration_solver_calls
-    name = calibration_study_name(spec, chosen)
-    loop = _Loop(problem, runs, noise=noise, budget=budget, progress=progress, label=name)
-    loop.run(spec.budget.surrogate_trials)
-    result = _result(loop, chosen, storage or spec.default_storage())
-    if record:
-        _record(result.storage, name, problem, loop.verified, result, data_hash(spec))
-    return result
-
-
-def _result(loop: _Loop, effects: Sequence[str], url: str) -> CalibrationResult:
-    """The result of a finished loop: its best verified point, and what the first-order
-    test and the statistics say there."""
-    problem, runs, name = loop.problem, loop.runs, loop.label
-    fit, best = loop.best_fit(), loop.best()
-    if best is None:
-        reason = runs.failures[0] if runs.failures else "no verification fitted in the budget"
-        raise InputDataError(
-            f"calibration of {name} found no parameter point the solver could run at every "
-            f"test ({reason}); check the parameter ranges"
-        )
-    # converged: the best verified point is a local optimum the first-order test passed
-    converged = fit is not None and fit.converged and fit.rmse <= best.rmse
-    misfit, p_value, determination = None, None, None
-    if fit is not None and converged:
-        p_value = loop.p_value(fit)
-        misfit = "within the noise" if p_value >= SIGNIFICANCE else "systematic"
-        determination = _determination(problem, fit).to_json()
-    result = CalibrationResult(
-        params=dict(zip(problem.space.names, map(float, best.theta), strict=True)),
-        rmse_n=float(best.rmse),
-        noise_n=loop.noise,
-        solver_calls=runs.calls,
-        effects=list(effects),
-        rmse_per_test_n=best.per_test,
-        status="converged" if converged else "budget_exhausted",
-        predicted_gain=fit.predicted_gain if fit is not None and converged else None,
-        misfit=misfit,
-        misfit_p_value=p_value,
-        determination=determination,
-        iterations=loop.iterations,
-        study=name,
-        storage=url,
-        message="",
-    )
-    return replace(result, message=_message(problem, result, fit))
-
-
-def _determination(problem: CalibrationProblem, fit: LocalFit) -> Any:
+# -- what the curves determine ---------------------------------------------------------------
+def determination_at(problem: CalibrationProblem, fit: LocalFit) -> Any:
     """What the curves determine at a converged local fit (bending stiffness, plastic
     moment per unit width, every parameter)."""
     space, thickness = problem.space, problem.spec.rig.thickness_mm
@@ -362,37 +216,8 @@ def _determination(problem: CalibrationProblem, fit: LocalFit) -> Any:
     )
 
 
-def _message(problem: CalibrationProblem, result: CalibrationResult, fit: LocalFit | None) -> str:
-    rmse, noise = result.rmse_n, result.noise_n
-    text = (
-        f"{model_label(result.effects)}: RMSE {rmse:.4g} N over {problem.n_points} points of "
-        f"{len(problem.test_ids)} tests, noise {noise:.4g} N ({rmse / noise:.2f}× noise), "
-        f"{result.solver_calls} solver calls, {result.status}"
-    )
-    if result.status != "converged":
-        reported = np.array(list(result.params.values()))
-        reported_is_fit = fit is not None and np.array_equal(fit.theta, reported)
-        why = (
-            fit.message
-            if fit is not None and reported_is_fit
-            else "no local fit ended at the best verified point"
-        )
-        return f"{text} ({why}; best verified point so far — raise --budget)"
-    assert result.determination is not None
-    return (
-        f"{text} ({fit.message if fit else ''}); {result.misfit} (F-test p = "
-        f"{result.misfit_p_value:.2g}); {result.determination['statement']}"
-    )
-
-
-def data_hash(spec: StudySpec) -> str:
-    """SHA-256 of the measurement file's bytes (which data a calibration saw)."""
-    assert spec.measurements_file is not None
-    return hashlib.sha256(Path(spec.measurements_file).read_bytes()).hexdigest()
-
-
 # -- the loop ----------------------------------------------------------------------------------
-class _Loop:
+class CalibrationLoop:
     """The global phase on the surrogate, then the local phase with the full solver.
 
     1. *Global*: an initial design, then search on the surrogate and verify, until
@@ -483,7 +308,7 @@ class _Loop:
         p_value = self.p_value(fit)
         if p_value >= VALLEY_P or fit.rmse > VALLEY_RMSE * self.noise:
             return []
-        direction = _determination(self.problem, fit).directions[-1]["weights"]  # in z
+        direction = determination_at(self.problem, fit).directions[-1]["weights"]  # in z
         move = np.array([direction.get(p.name, 0.0) / p.span for p in self.problem.space])
         move *= VALLEY_STEP / np.max(np.abs(move))
         starts = [np.clip(fit.unit + sign * move, 0.0, 1.0) for sign in (1.0, -1.0)]
@@ -688,76 +513,3 @@ def _with_gradient(
         return float(values[0]), (values[1:] - values[0]) / steps
 
     return value_and_gradient
-
-
-# -- the record in the Optuna storage -----------------------------------------------------------
-def _record(
-    url: str,
-    name: str,
-    problem: CalibrationProblem,
-    verified: list[VerifiedPoint],
-    result: CalibrationResult,
-    data_sha: str,
-) -> None:
-    """Verifications as trials of the study ``name``; the result as a study attribute."""
-    quiet_optuna()
-    study = optuna.create_study(study_name=name, storage=open_storage(url), load_if_exists=True)
-    known = {
-        t.user_attrs.get("verification_key")
-        for t in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
-    }
-    trial_distributions: dict[str, BaseDistribution] = dict(distributions(problem.space))
-    for item in verified:
-        key = hashlib.sha256("".join(item.keys).encode()).hexdigest()
-        if key in known:
-            continue
-        inside = problem.space.clip(item.theta)
-        params = dict(zip(problem.space.names, map(float, inside), strict=True))
-        known.add(key)
-        trial = optuna.trial.create_trial(
-            params=params,
-            distributions=trial_distributions,
-            value=item.rmse,
-            user_attrs={
-                "verification_key": key,
-                "phase": item.phase,
-                "predicted_rmse_n": item.predicted,
-                "rmse_per_test_n": item.per_test,
-                "solver_calls": item.calls,
-                "effects": list(problem.effects),
-                "data_sha256": data_sha,
-            },
-        )
-        study.add_trial(trial)
-    study.set_user_attr("result", json.loads(json.dumps(result.to_json())))
-    study.set_user_attr("data_sha256", data_sha)
-    _note(study, calibration_note(result.to_json()))
-
-
-def calibration_note(result: Mapping[str, Any]) -> list[str]:
-    """The calibration's status and what the curves determine, as Markdown lines
-    (the dashboard note of the calibration study; compare and diagnose repeat it)."""
-    lines = [f"## Calibration: {result['status']}", "", result["message"]]
-    determination = result.get("determination")
-    if determination:
-        lines += ["", "| quantity | value | 95 % interval |", "|---|---|---|"]
-        for key, c in determination["combinations"].items():
-            span = "not determined" if c["low"] is None else f"{c['low']:.4g} – {c['high']:.4g}"
-            lines.append(f"| {key} | {c['value']:.4g} | {span} |")
-        for name, value in result["params"].items():
-            interval = determination["intervals"].get(name)
-            span = (
-                "held at a bound" if interval is None else f"{interval[0]:.4g} – {interval[1]:.4g}"
-            )
-            free = " (free within its range)" if name in determination["free"] else ""
-            lines.append(f"| {name} | {value:.4g} | {span}{free} |")
-    return lines
-
-
-def _note(study: optuna.Study, lines: list[str]) -> None:
-    """Markdown note of the study in optuna-dashboard (skipped without it)."""
-    try:
-        from optuna_dashboard import save_note
-    except ImportError:
-        return
-    save_note(study, "\n".join(lines))

@@ -6,10 +6,10 @@ effect's ``effect.param``), the *condition groups* (tests whose conditions the
 model cannot tell apart — replicates, or a ``direction`` no enabled effect reads —
 share one solver run per parameter point), the measured points, and the misfit
 (measured minus model at every measured point; the model curve is the solver's on
-whole degrees, interpolated to the measured angles). Also: what the solver sees
-of a test as surrogate inputs (:func:`state_features`), the coat's section, the
-study's measurements and noise level (:func:`load_calibration`), and the checks
-of the commands' options.
+whole degrees, interpolated to the measured angles). Also: each run's surrogate
+inputs (:func:`surrogate.solvers.state_features` of its model state), the coat's
+section, the study's measurements and noise level (:func:`load_calibration`), and
+the checks of the commands' options.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 from .._errors import InputDataError
 from ..effects import ModelState, check_effects, get_effect, load_plugin
 from ..physics import bending_stiffness, plastic_moment
-from ..solvers import model_state_of
+from ..solvers import model_state_of, state_features
 from ..solvers._batch import solver_inputs
 from ..study._conditions import CONDITIONS, RIG_CONDITIONS
 from ..study._measurements import MeasurementSet, load_measurements
@@ -40,7 +40,6 @@ __all__ = [
     "coat_section",
     "load_calibration",
     "model_label",
-    "state_features",
 ]
 
 MIN_BUDGET = 10  # full-solver runs: fewer cannot fit even the initial design
@@ -211,47 +210,6 @@ class CalibrationProblem:
                 for x, g in zip(np.atleast_2d(X), groups, strict=True)
             ]
         )
-
-
-def state_features(state: ModelState) -> np.ndarray:
-    """What the solver sees, as surrogate inputs (physical, dimensionless where it helps).
-
-    Every effect acts through the model state of a test (design.md §4), so a
-    surrogate over the state serves every model and every test condition: the
-    tension effect's ``Ecoat·(1 + kE·T)`` is just another stiffness to it.
-    Features: log of the total bending stiffness, of the plastic moment, of the
-    yield strain and of Tcoat; the hardening ratio; the bare webbing's share of
-    the stiffness; the probe friction; the self-weight over the strip's
-    stiffness (``q·L³/(D·b)``); the strip's stiffness over the clamp's
-    (``D·b/(l·k)``); the end tension over the elastic force scale
-    (``T·l²/(D·b)``); the bending length and the width.
-    """
-    rig = state.rig
-    coat = bending_stiffness(state.ecoat_mpa, state.tcoat_mm, rig.thickness_mm)
-    total = coat + state.extra_stiffness_nmm
-    plastic = plastic_moment(state.scoat_mpa, state.tcoat_mm, rig.thickness_mm)
-    flexural = total * rig.width_mm  # D·b [N·mm²]
-    clamp = (
-        0.0
-        if state.clamp_stiffness_nmm is None
-        else flexural / rig.bending_length_mm / state.clamp_stiffness_nmm
-    )
-    return np.array(
-        [
-            np.log(total),
-            np.log(plastic),
-            np.log(state.scoat_mpa / state.ecoat_mpa),
-            np.log(state.tcoat_mm),
-            state.hardening_ratio,
-            state.extra_stiffness_nmm / total,
-            rig.friction,
-            state.line_load_n_mm * rig.free_length_mm**3 / flexural,
-            clamp,
-            rig.tension_n * rig.bending_length_mm**2 / flexural,
-            np.log(rig.bending_length_mm),
-            np.log(rig.width_mm),
-        ]
-    )
 
 
 def coat_section(params: Mapping[str, float], thickness_mm: float) -> tuple[float, float]:

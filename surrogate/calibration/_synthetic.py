@@ -36,6 +36,8 @@ def synthetic_measurements(
     seed: int,
     rig: Rig | None = None,
     angles_deg: np.ndarray | None = None,
+    solver: str = "builtin",
+    solver_settings: Mapping[str, Any] | None = None,
 ) -> pd.DataFrame:
     """Measured curves in the long format of design.md §5.
 
@@ -53,20 +55,29 @@ def synthetic_measurements(
         clipped at 0 (a load cell reads no pull).
     seed : int
         Seed of the noise.
+    solver, solver_settings : optional
+        The full solver that makes the curves (default: the built-in one); tests with
+        the same conditions (replicates) share one run.
     """
     rng = np.random.default_rng(seed)
     angles = np.arange(0.0, 91.0) if angles_deg is None else np.asarray(angles_deg, float)
     frames = []
+    curves: dict[str, Any] = {}
     for test in tests:
         conditions = {k: v for k, v in test.items() if k in CONDITIONS}
-        curve = simulate(
-            coating["ecoat_gpa"],
-            coating["scoat_gpa"],
-            coating["tcoat_mm"],
-            rig=rig,
-            effects=effects,
-            conditions=conditions,
-        )
+        key = repr(sorted(conditions.items()))
+        if key not in curves:
+            curves[key] = simulate(
+                coating["ecoat_gpa"],
+                coating["scoat_gpa"],
+                coating["tcoat_mm"],
+                rig=rig,
+                effects=effects,
+                conditions=conditions,
+                solver=solver,
+                solver_settings=solver_settings,
+            )
+        curve = curves[key]
         force = np.interp(angles, curve.angle_deg, curve.force_n)
         noisy = np.maximum(force + noise_n * rng.standard_normal(angles.size), 0.0)
         frame = pd.DataFrame({"test_id": test["test_id"], "angle_deg": angles, "force_n": noisy})

@@ -5,13 +5,50 @@
   physical coating features of :class:`FeatureMap`.
 - :class:`CurveSurrogate` — the whole force curve over parameters × test conditions
   (the calibration's), on whatever inputs the caller's feature function gives.
+- :class:`Discrepancy` — what an expensive solver adds to the built-in one, learned
+  from a few expensive runs (the multi-fidelity correction; numpy and SciPy only).
 
-Both reduce curves to one :class:`~surrogate.gp._basis.PrincipalBasis`. Nothing here
-reads files of a study, prints, or sees an Optuna object.
+The two curve surrogates reduce curves to one :class:`~surrogate.gp._basis.PrincipalBasis`.
+Nothing here reads files of a study, prints, or sees an Optuna object.
 """
 
-from ._curves import CurveSurrogate
-from ._features import FeatureMap
-from ._model import CoatingSurrogate, cross_validation_table
+from importlib import import_module
+from typing import Any
 
-__all__ = ["CoatingSurrogate", "CurveSurrogate", "FeatureMap", "cross_validation_table"]
+# scikit-learn loads with the first surrogate used: the discrepancy and the curve scale
+# (numpy and SciPy only) serve the solvers without it.
+_LAZY = {
+    "CurveSurrogate": "._curves",
+    "FeatureMap": "._features",
+    "CoatingSurrogate": "._model",
+    "cross_validation_table": "._model",
+    "Discrepancy": "._discrepancy",
+    "FORCE_SCALE_N": "._scale",
+    "force_of_latent": "._scale",
+    "latent_of_force": "._scale",
+    "latent_slope": "._scale",
+}
+
+__all__ = [
+    "FORCE_SCALE_N",
+    "CoatingSurrogate",
+    "CurveSurrogate",
+    "Discrepancy",
+    "FeatureMap",
+    "cross_validation_table",
+    "force_of_latent",
+    "latent_of_force",
+    "latent_slope",
+]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        value = getattr(import_module(_LAZY[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

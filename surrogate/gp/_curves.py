@@ -31,10 +31,10 @@ from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import ConstantKernel, Kernel, Matern, WhiteKernel
 
 from ._basis import PrincipalBasis
+from ._scale import FORCE_SCALE_N, force_of_latent, latent_of_force, latent_slope
 
 __all__ = ["FORCE_SCALE_N", "CurveSurrogate"]
 
-FORCE_SCALE_N = 0.02  # asinh(F/s): logarithmic above ~s, linear through 0
 CURVE_VARIANCE = 1.0 - 1e-6  # share of the transformed curves' variance the basis keeps
 MAX_COMPONENTS = 16
 TREND_RIDGE = 1e-6  # on the trend's slopes (not its intercept)
@@ -79,7 +79,7 @@ class CurveSurrogate:
     def fit(self, X: np.ndarray, groups: np.ndarray, curves: np.ndarray) -> CurveSurrogate:
         """Fit on runs at ``X`` (n, p), ``groups`` (n,) with ``curves`` (n, A)."""
         Z = self._inputs(X, groups)
-        Y = np.arcsinh(curves[:, 1:] / FORCE_SCALE_N)
+        Y = latent_of_force(curves[:, 1:])
         self.pca_ = PrincipalBasis.fit(Y, variance=CURVE_VARIANCE, max_components=MAX_COMPONENTS)
         scores = self.pca_.project(Y)
         self.trend_ = self._trend(Z, scores)
@@ -138,11 +138,11 @@ class CurveSurrogate:
             scores = trend + np.column_stack([_posterior_mean(gp, Z) for gp in self.gps_])
         Y = self.pca_.reconstruct(scores)
         curves = np.zeros((m * G, Y.shape[1] + 1))
-        curves[:, 1:] = FORCE_SCALE_N * np.sinh(Y)
+        curves[:, 1:] = force_of_latent(Y)
         if not return_std:
             return curves.reshape(m, G, -1)
         std = np.zeros_like(curves)
-        std[:, 1:] = FORCE_SCALE_N * np.cosh(Y) * np.sqrt(self.pca_.reconstruct_variance(score_var))
+        std[:, 1:] = latent_slope(Y) * np.sqrt(self.pca_.reconstruct_variance(score_var))
         return curves.reshape(m, G, -1), std.reshape(m, G, -1)
 
 

@@ -50,6 +50,7 @@ def assess_identifiability(
     preference_order: Sequence[str],
     target_n: float,
     solver_gradient: np.ndarray | None = None,
+    gradient_source: str | None = None,
 ) -> Identifiability:
     """Assess what a scalar F60 target determines around ``chosen``.
 
@@ -66,6 +67,9 @@ def assess_identifiability(
     solver_gradient : ndarray, shape (d,), optional
         ``∂ log F60 / ∂ log p`` from full-solver runs at ``chosen``; preferred
         to the surrogate's, which is noisy when the surrogate has few points.
+    gradient_source : str, optional
+        Where ``solver_gradient`` came from, if not from full-solver runs (the
+        corrected built-in model of a multi-fidelity study).
     """
     log_chosen = np.log(np.asarray(chosen, dtype=float))
     exponents, scale = _exponents(log_f60, log_chosen, equally_good, solver_gradient)
@@ -76,7 +80,11 @@ def assess_identifiability(
     # F60 within ±tolerance fixes the combination to ±tolerance / max|a|; the
     # predicted equally good set also shows the surrogate's own scatter.
     uncertainty = tolerance / scale
-    source = "full-solver runs at the result" if solver_gradient is not None else "the surrogate"
+    source = (
+        (gradient_source or "full-solver runs at the result")
+        if solver_gradient is not None
+        else "the surrogate"
+    )
     statement = (
         f"F60 = {target_n:.4g} N ± {100 * tolerance:g} % determines one combination, "
         f"{combination}{_meaning(names, exponents)}, to ±{100 * uncertainty:.1f} % "
@@ -87,7 +95,13 @@ def assess_identifiability(
     )
     return Identifiability(
         exponents={n: float(e) for n, e in zip(names, exponents, strict=True)},
-        exponents_from="full solver" if solver_gradient is not None else "surrogate",
+        exponents_from=(
+            "surrogate"
+            if solver_gradient is None
+            else "corrected model"
+            if gradient_source
+            else "full solver"
+        ),
         combination=combination,
         combination_value=value,
         relative_uncertainty=float(uncertainty),

@@ -22,12 +22,14 @@ from scipy.stats import norm
 
 from .._errors import InputDataError
 from .._log import show_progress
+from ..solvers._fidelity import MissCounter, fidelity_record
 from ..storage._dashboard import attach_run_report
 from ..storage._optuna import distributions
 from ..storage._storage import check_workers
 from ..study._spec import StudySpec, Targets, load_study
 from ._commands import fit_surrogate
 from ._doe import make_design
+from ._fidelity import CorrectedModel, LowFidelity
 from ._identifiability import assess_identifiability
 from ._objective import constraint_values, is_feasible, refuse_model_effects, relative_misfit
 from ._verify import Verification, Verifier, open_verify_study, target_of, verify_study_name
@@ -37,6 +39,7 @@ __all__ = ["RunResult", "run"]
 
 THETA_MARGIN_SIGMA = 1.645  # one-sided 95 % margin on the predicted θsat
 _SEARCH_BATCH = 10
+_LEAST_LIKELY = 1e-9  # a chance of meeting the target below this is none
 
 
 @dataclass(frozen=True)
@@ -48,6 +51,15 @@ class RunResult:
     ``solver_calls`` counts every full-solver run of the study, the
     identifiability runs after verification included; ``calls_to_verify``
     the runs until a verified point met the target.
+
+    ``multi_fidelity`` (None for a built-in study): with an external full solver the
+    built-in one is its prior (:mod:`surrogate.solvers._fidelity`) — ``low_fidelity``
+    (``builtin``), ``low_fidelity_runs`` (built-in runs, counted apart from
+    ``solver_calls``, which are the expensive ones), ``correction`` (the size of the
+    correction at the answer, :class:`~surrogate.solvers._fidelity.Correction`),
+    ``dropped`` (why the correction was not trusted and the single-fidelity loop took
+    over, else None) and ``dropped_after`` (expensive runs by then). The identifiability
+    exponents then come from the corrected model: no expensive runs after verification.
     """
 
     status: str
@@ -59,6 +71,7 @@ class RunResult:
     identifiability: dict[str, Any]
     iterations: int
     message: str
+    multi_fidelity: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -107,32 +120,86 @@ def run(
         else WorkerDispatcher(spec, storage_url, jobs=jobs, progress=progress),
         replay=True,
     )
-    iterations = _search_and_verify(spec, verifier)
+    fidelity = _Fidelity(LowFidelity(spec)) if spec.low_fidelity else None
+    iterations = _search_and_verify(spec, verifier, fidelity)
     calls_to_verify = verifier.calls if verifier.chosen() is not None else None
     verifier.finish()
-    return _result(spec, verifier, storage_url, iterations, calls_to_verify)
+    return _result(spec, verifier, storage_url, iterations, calls_to_verify, fidelity)
 
 
-def _search_and_verify(spec: StudySpec, verifier: Verifier) -> int:
+def _search_and_verify(spec: StudySpec, verifier: Verifier, fidelity: _Fidelity | None) -> int:
     """The loop: an initial design, then surrogate → search → verification until a
-    verified point meets the target or the budget is spent; returns the iterations."""
+    verified point meets the target or the budget is spent; returns the iterations.
+
+    With an external full solver (``fidelity``) the corrected built-in model takes the
+    surrogate's place from the first run on; where the correction is not trusted
+    (:mod:`surrogate.solvers._fidelity`'s rules) this loop takes over, the expensive
+    runs so far kept.
+    """
+    iteration, prefix = 0, ""
+    if fidelity is not None:
+        iteration = _corrected_search(spec, verifier, fidelity)
+        if fidelity.dropped is None:
+            return iteration
+        prefix = "single fidelity: "
     initial = make_design("lhs", spec.space, n=spec.budget.initial_samples, seed=spec.seed)
-    verifier.verify(initial[list(spec.space.names)].to_numpy(), phase="initial design")
-    iteration = 0
+    verifier.verify(initial[list(spec.space.names)].to_numpy(), phase=f"{prefix}initial design")
     while verifier.chosen() is None and verifier.calls < spec.budget.max_solver_calls:
         iteration += 1
         model = fit_surrogate(verifier.sample_set(), seed=spec.seed, with_curves=False)
-        room = spec.budget.max_solver_calls - verifier.calls
-        candidates = _propose(
-            model,
-            spec,
-            verifier.points(),
-            iteration,
-            n=min(spec.budget.candidates_per_iteration, room),
-        )
+        candidates = _candidates(model, spec, verifier, iteration)
         if len(candidates) == 0:
             break
-        verifier.verify(candidates, phase=f"iteration {iteration}")
+        verifier.verify(candidates, phase=f"{prefix}iteration {iteration}")
+    return iteration
+
+
+def _candidates(model: Any, spec: StudySpec, verifier: Verifier, iteration: int) -> np.ndarray:
+    room = spec.budget.max_solver_calls - verifier.calls
+    n = min(spec.budget.candidates_per_iteration, room)
+    return _propose(model, spec, verifier.points(), iteration, n=n)
+
+
+@dataclass
+class _Fidelity:
+    """The built-in solver as the prior of an external one: its runs, and why the
+    correction was dropped (None while it is trusted)."""
+
+    low: LowFidelity
+    dropped: str | None = None
+    dropped_after: int = 0
+
+
+def _corrected_search(spec: StudySpec, verifier: Verifier, fidelity: _Fidelity) -> int:
+    """Search the corrected built-in model and verify its candidates until a verified
+    point meets the target; the first expensive run is the built-in model's own answer
+    (its ``initial design``). Stops early, with ``fidelity.dropped`` set, where the
+    correction is too large or too irregular; returns the iterations."""
+    misses = MissCounter()
+    iteration = 0
+    tolerance = float(np.log1p(spec.targets.tolerance))
+    while verifier.chosen() is None and verifier.calls < spec.budget.max_solver_calls:
+        model = CorrectedModel(spec, fidelity.low, list(verifier.records.values()))
+        refused = model.refused()
+        if refused is not None:
+            fidelity.dropped, fidelity.dropped_after = refused, verifier.calls
+            break
+        candidates = _candidates(model, spec, verifier, iteration)
+        if len(candidates) == 0:
+            break
+        predicted = model.predict(candidates, return_std=True)
+        verifier.verify(
+            candidates, phase="initial design" if iteration == 0 else f"iteration {iteration}"
+        )
+        iteration += 1
+        for i, point in enumerate(candidates):
+            record = verifier.record(dict(zip(spec.space.names, map(float, point), strict=True)))
+            if record is None or not record.ok or not np.isfinite(predicted["f60_n"][i]):
+                continue
+            error = float(np.log(record.f60_n / predicted["f60_n"][i]))
+            if misses.judge(error, float(predicted["log_f60_std"][i]), tolerance):
+                fidelity.dropped, fidelity.dropped_after = misses.reason, verifier.calls
+                return iteration
     return iteration
 
 
@@ -185,7 +252,7 @@ def _search(model: Any, spec: StudySpec, iteration: int) -> pd.DataFrame:
     while len(rows) < spec.budget.surrogate_trials:
         trials = [search.ask(space_distributions) for _ in range(_SEARCH_BATCH)]
         X = np.array([[t.params[n] for n in space.names] for t in trials])
-        pred = model.predict(X, return_std=True)
+        pred = _solved(model.predict(X, return_std=True))
         for i, trial in enumerate(trials):
             params = dict(zip(space.names, X[i], strict=True))
             misfit = relative_misfit(pred["f60_n"][i], target)
@@ -209,6 +276,19 @@ def _search(model: Any, spec: StudySpec, iteration: int) -> pd.DataFrame:
                 }
             )
     return pd.DataFrame(rows)
+
+
+def _solved(pred: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Predictions where a point the model could not evaluate (the corrected model's
+    built-in run failed: NaN) is the worst there is: infinite misfit, θsat 0°, certain."""
+    failed = ~np.isfinite(pred["f60_n"])
+    if not failed.any():
+        return pred
+    out = dict(pred)
+    out["f60_n"] = np.where(failed, np.inf, pred["f60_n"])
+    for key in ("theta_sat_deg", "theta_sat_deg_std", "f60_n_std", "log_f60_std"):
+        out[key] = np.where(failed, 0.0, pred[key])
+    return out
 
 
 def _probability_of_meeting(pred: dict[str, np.ndarray], i: int, spec: StudySpec) -> float:
@@ -240,8 +320,9 @@ def _propose(
     """Promising, diverse candidates.
 
     First the most preferred point among those most likely to meet the target
-    (probability within 80 % of the best found), then the good points farthest
-    from everything run so far.
+    (probability within 80 % of the best found; where none has a chance above
+    ``_LEAST_LIKELY``, the feasible point of least misfit), then the good points
+    farthest from everything run so far.
     """
     trials = _search(model, spec, iteration)
     names = list(spec.space.names)
@@ -251,7 +332,13 @@ def _propose(
     trials, unit_all = trials[fresh].reset_index(drop=True), unit_all[fresh]
     if trials.empty:
         return np.empty((0, len(names)))
-    pool = np.flatnonzero(trials.p_meet.to_numpy() >= 0.8 * trials.p_meet.max())
+    p_meet = trials.p_meet.to_numpy()
+    if p_meet.max() > _LEAST_LIKELY:
+        pool = np.flatnonzero(p_meet >= 0.8 * p_meet.max())
+    else:  # a confident model sees no point within tolerance: the nearest feasible ones
+        pool = np.array(
+            [int(np.lexsort((trials.misfit.to_numpy(), ~trials.feasible.to_numpy()))[0])]
+        )
     keys = [trials[name].to_numpy()[pool] for name in reversed(spec.preference_order)]
     chosen = [int(pool[np.lexsort(keys)[0]])]
     good = (trials.feasible & (trials.misfit <= 0.5 * spec.targets.tolerance)).to_numpy()
@@ -278,23 +365,21 @@ def _result(
     storage_url: str,
     iterations: int,
     calls_to_verify: int | None,
+    fidelity: _Fidelity | None,
 ) -> RunResult:
     chosen = verifier.chosen()
     status = "verified" if chosen is not None else "budget_exhausted"
     point = chosen or verifier.best()
     verified = None
     identifiability: dict[str, Any] = {}
-    names = verifier.names
     if point is not None:
         verified = {
             **point.params,
             "f60_n": point.f60_n,
             "theta_sat_deg": point.theta_sat_deg,
         }
-    n_ok = sum(r.ok for r in verifier.records.values())
-    if point is not None and n_ok >= 3:
-        # refit on every verified run, the last candidates included
-        model = fit_surrogate(verifier.sample_set(), seed=spec.seed, with_curves=False)
+    model = _final_model(spec, verifier, fidelity)
+    if point is not None and model is not None:
         good = _equally_good(model, spec, verifier, iterations)
         if chosen is None and len(good) == 0:
             identifiability = {
@@ -302,9 +387,11 @@ def _result(
                 "so the data determine nothing yet."
             }
         else:
-            gradient = verifier.sensitivities(point) if chosen is not None else None
-            identifiability = _assess(spec, names, point, model, good, gradient)
+            identifiability = _assess(spec, point, model, good, chosen is not None, verifier)
+    multi = _multi_fidelity(spec, fidelity, model, point)
     message = _message(spec, status, verifier, point, calls_to_verify)
+    if multi is not None:
+        message += multi.pop("sentence")
     result = RunResult(
         status,
         verifier.calls,
@@ -315,6 +402,7 @@ def _result(
         identifiability,
         iterations,
         message,
+        multi,
     )
     # what `surrogate report` reads back: the result as the verify study's attribute
     verifier.study.set_user_attr("result", json.loads(json.dumps(result.to_json())))
@@ -329,14 +417,45 @@ def _result(
     return result
 
 
+def _final_model(spec: StudySpec, verifier: Verifier, fidelity: _Fidelity | None) -> Any:
+    """The model of every verified run, the last candidates included: the corrected
+    built-in model while it is trusted, else the GP surrogate (None with < 3 runs)."""
+    if fidelity is not None and fidelity.dropped is None:
+        return CorrectedModel(spec, fidelity.low, list(verifier.records.values()))
+    if sum(r.ok for r in verifier.records.values()) < 3:
+        return None
+    return fit_surrogate(verifier.sample_set(), seed=spec.seed, with_curves=False)
+
+
+def _multi_fidelity(
+    spec: StudySpec, fidelity: _Fidelity | None, model: Any, point: Verification | None
+) -> dict[str, Any] | None:
+    """The ``multi_fidelity`` record with its sentence (None for a built-in study)."""
+    if fidelity is None:
+        return None
+    size = model.correction(point) if isinstance(model, CorrectedModel) and point else None
+    return fidelity_record(
+        spec.solver, fidelity.low.runs, size, fidelity.dropped, fidelity.dropped_after
+    )
+
+
 def _assess(
     spec: StudySpec,
-    names: list[str],
     point: Verification,
     model: Any,
     good: np.ndarray,
-    gradient: np.ndarray | None,
+    verified: bool,
+    verifier: Verifier,
 ) -> dict[str, Any]:
+    """What the target determines around ``point``; the exponents at a verified point
+    from the full solver (``identifiability_runs`` more runs) or, in a multi-fidelity
+    study, from the corrected built-in model."""
+    names = verifier.names
+    gradient, source = None, None
+    if verified and isinstance(model, CorrectedModel):
+        gradient, source = model.sensitivities(point), "the corrected built-in model at the result"
+    elif verified:
+        gradient = verifier.sensitivities(point)
     assessment = assess_identifiability(
         names,
         np.array([point.params[n] for n in names]),
@@ -346,6 +465,7 @@ def _assess(
         preference_order=spec.preference_order,
         target_n=target_of(spec),
         solver_gradient=gradient,
+        gradient_source=source,
     )
     return assessment.to_json()
 

@@ -109,8 +109,9 @@ def plan_of(spec: StudySpec) -> str:
 
     A planner started again on the same storage with the same plan replays it
     (:class:`Verifier`); runs of another plan are training data from the start.
-    The space, the constraints, the preferences and the ``[budget]`` keys but the run
-    limit are part of it (hashed), as they change the decisions.
+    The space, the constraints, the preferences, the ``[budget]`` keys but the run
+    limit and whether the built-in solver is the expensive one's prior are part of it
+    (hashed), as they change the decisions.
     """
     drivers = json.dumps(
         [
@@ -122,6 +123,7 @@ def plan_of(spec: StudySpec) -> str:
             },
             list(spec.preference_order),
             dataclasses.asdict(spec.constraints),
+            *([{"multi_fidelity": True}] if spec.low_fidelity else []),
         ],
         sort_keys=True,
         default=str,
@@ -434,6 +436,10 @@ class Verifier:
 
     def _key(self, params: Mapping[str, float]) -> str:
         return input_hash(verification_inputs(self.spec, params))
+
+    def record(self, params: Mapping[str, float]) -> Verification | None:
+        """The record of the run at ``params``, if it is done."""
+        return self.records.get(self._key(params))
 
     def solve(self, params: dict[str, float], *, phase: str) -> Verification:
         """One full-solver run as a trial; a finished run is never repeated."""

@@ -2,7 +2,8 @@
 
 - **Model state** (``_state``): coating + rig + conditions + effects →
   :func:`model_state_of` / :func:`model_state`, the one path from a run's
-  inputs to what every solver models.
+  inputs to what every solver models; :func:`state_features`, that state as
+  surrogate inputs.
 - **Solvers** behind one interface (``_base``): ``get_solver(kind).solve(inputs)``
   turns the plain-JSON inputs of a run into its plain-JSON result (a failure is
   a result); ``run(inputs)`` raises it instead. The kinds register here:
@@ -33,10 +34,11 @@ from ._lsdyna import (
     parse_rcforc,
 )
 from ._simulate import BendingCurve, simulate
-from ._state import coating_state, model_state, model_state_of
+from ._state import STATE_FEATURE_SPANS, coating_state, model_state, model_state_of, state_features
 
 __all__ = [
     "CALCULIX_MESHES",
+    "STATE_FEATURE_SPANS",
     "BendingCurve",
     "BuiltinSolver",
     "CalculixSolver",
@@ -61,4 +63,5 @@ __all__ = [
     "simulate",
     "solve_inputs",
     "solver_inputs",
+    "state_features",
 ]

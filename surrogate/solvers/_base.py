@@ -25,12 +25,15 @@ import tempfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from .._errors import InputDataError, SolverError
 from ..physics import curve_features
+
+if TYPE_CHECKING:
+    from ..effects import ModelState
 
 __all__ = [
     "Solver",
@@ -77,6 +80,11 @@ class Solver:
         A failed run is a result (``status`` ``failed`` with its ``reason``).
         """
         raise NotImplementedError
+
+    def refuses(self, state: ModelState) -> str | None:
+        """Why this solver cannot model ``state`` (an effect it has no physics for), or
+        None; asked before a run, so a refused model is skipped with its reason."""
+        return None
 
     def run(self, inputs: Mapping[str, Any]) -> dict[str, Any]:
         """One run whose failure raises: a SolverError naming the solver and the reason."""

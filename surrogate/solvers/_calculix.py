@@ -373,18 +373,27 @@ def calculix_deck(state: ModelState, *, mesh: str | CalculixMesh = "coarse") -> 
                 f"[solver] mesh must be one of {', '.join(CALCULIX_MESHES)}, got {mesh!r}"
             )
         mesh = CALCULIX_MESHES[mesh]
+    refused = refusal(state)
+    if refused is not None:
+        raise InputDataError(refused)
+    return _Deck(state, mesh).text()
+
+
+def refusal(state: ModelState) -> str | None:
+    """Why the deck cannot model ``state`` (None when it can): it has no bare-webbing
+    stiffness, self-weight or compliant clamp."""
     if state.extra_stiffness_nmm:
-        raise InputDataError(
+        return (
             "the calculix solver has no bare-webbing bending stiffness (membrane_bending); "
             "use the builtin solver for that effect"
         )
     if state.line_load_n_mm or state.clamp_stiffness_nmm is not None:
         effect = "gravity" if state.line_load_n_mm else "clamp_slip"
-        raise InputDataError(
+        return (
             f"the calculix deck models neither self-weight nor a compliant clamp ({effect}); "
             "use the builtin solver for that effect"
         )
-    return _Deck(state, mesh).text()
+    return None
 
 
 # -- the output -------------------------------------------------------------------------------
@@ -490,6 +499,9 @@ class CalculixSolver(Solver):
 
     def solve(self, inputs: Mapping[str, Any]) -> dict[str, Any]:
         return guarded(lambda: self._solve(inputs))
+
+    def refuses(self, state: ModelState) -> str | None:
+        return refusal(state)
 
     def _solve(self, inputs: Mapping[str, Any]) -> dict[str, Any]:
         settings = self.check_settings(inputs.get("solver_settings") or {})

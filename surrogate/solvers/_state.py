@@ -11,12 +11,26 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 from .._errors import InputDataError
 from .._validate import check_positive
 from ..effects import ModelState, get_effect
+from ..physics import bending_stiffness, plastic_moment
 from ..study import Rig, check_conditions, gpa_to_mpa, rig_for
 
-__all__ = ["coating_state", "model_state", "model_state_of"]
+__all__ = [
+    "STATE_FEATURE_SPANS",
+    "coating_state",
+    "model_state",
+    "model_state_of",
+    "state_features",
+]
+
+#: The span over which each of :func:`state_features` typically varies (the paper's
+#: ranges: D, Mp and the yield strain over about e⁴, Tcoat over e²; the ratios over
+#: what the effects' ranges give): the unit of the low-to-high discrepancy's inputs.
+STATE_FEATURE_SPANS = np.array([4.0, 4.0, 4.0, 2.0, 0.5, 1.0, 0.5, 1.0, 0.1, 10.0, 1.0, 1.0])
 
 
 def coating_state(ecoat_gpa: float, scoat_gpa: float, tcoat_mm: float, rig: Rig) -> ModelState:
@@ -64,4 +78,45 @@ def model_state(inputs: Mapping[str, Any]) -> ModelState:
         Rig(**inputs["rig"]),
         inputs.get("effects") or None,
         inputs.get("conditions") or None,
+    )
+
+
+def state_features(state: ModelState) -> np.ndarray:
+    """What the solver sees, as surrogate inputs (physical, dimensionless where it helps).
+
+    Every effect acts through the model state of a test (design.md §4), so a
+    surrogate over the state serves every model and every test condition: the
+    tension effect's ``Ecoat·(1 + kE·T)`` is just another stiffness to it.
+    Features: log of the total bending stiffness, of the plastic moment, of the
+    yield strain and of Tcoat; the hardening ratio; the bare webbing's share of
+    the stiffness; the probe friction; the self-weight over the strip's
+    stiffness (``q·L³/(D·b)``); the strip's stiffness over the clamp's
+    (``D·b/(l·k)``); the end tension over the elastic force scale
+    (``T·l²/(D·b)``); the bending length and the width.
+    """
+    rig = state.rig
+    coat = bending_stiffness(state.ecoat_mpa, state.tcoat_mm, rig.thickness_mm)
+    total = coat + state.extra_stiffness_nmm
+    plastic = plastic_moment(state.scoat_mpa, state.tcoat_mm, rig.thickness_mm)
+    flexural = total * rig.width_mm  # D·b [N·mm²]
+    clamp = (
+        0.0
+        if state.clamp_stiffness_nmm is None
+        else flexural / rig.bending_length_mm / state.clamp_stiffness_nmm
+    )
+    return np.array(
+        [
+            np.log(total),
+            np.log(plastic),
+            np.log(state.scoat_mpa / state.ecoat_mpa),
+            np.log(state.tcoat_mm),
+            state.hardening_ratio,
+            state.extra_stiffness_nmm / total,
+            rig.friction,
+            state.line_load_n_mm * rig.free_length_mm**3 / flexural,
+            clamp,
+            rig.tension_n * rig.bending_length_mm**2 / flexural,
+            np.log(rig.bending_length_mm),
+            np.log(rig.width_mm),
+        ]
     )

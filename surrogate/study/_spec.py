@@ -75,6 +75,7 @@ class StudySpec:
     seed: int = 0
     solver: str = "builtin"
     solver_settings: dict[str, Any] = field(default_factory=dict)
+    multi_fidelity: bool = True
     rig: Rig = field(default_factory=Rig)
     space: ParameterSpace = PAPER_SPACE
     targets: Targets = field(default_factory=Targets)
@@ -85,6 +86,14 @@ class StudySpec:
     effects: tuple[str, ...] = ()
     budget: Budget = field(default_factory=Budget)
     storage: str | None = None
+
+    @property
+    def low_fidelity(self) -> bool:
+        """Whether the built-in solver is the fast prior of this study's (external)
+        full solver (``[solver] multi_fidelity``, on by default for external kinds)."""
+        from ..solvers._fidelity import uses_low_fidelity
+
+        return uses_low_fidelity(self.solver, self.multi_fidelity)
 
     @property
     def directory(self) -> Path:
@@ -116,7 +125,7 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
     where = str(path) if path is not None else "study"
     _only(data, _SECTIONS, where, "")
     name, seed, storage = _study(_section(data, "study", where), where)
-    kind, solver_settings = _solver(_section(data, "solver", where), where, path)
+    kind, solver_settings, multi_fidelity = _solver(_section(data, "solver", where), where, path)
     rig = _rig(_section(data, "rig", where), where)
     space = _space(_section(data, "parameters", where), where)
     targets, measurements = _targets(data, where, path)
@@ -135,6 +144,7 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
         seed=seed,
         solver=kind,
         solver_settings=solver_settings,
+        multi_fidelity=multi_fidelity,
         rig=rig,
         space=space,
         targets=targets,
@@ -192,9 +202,12 @@ def _effects(section: dict[str, Any], where: str) -> tuple[str, ...]:
     return tuple(effects)
 
 
-def _solver(section: dict[str, Any], where: str, path: Path | None) -> tuple[str, dict[str, Any]]:
-    """``[solver]``: the kind (one of the solver registry's) and its validated settings
-    (see :mod:`surrogate.solvers`)."""
+def _solver(
+    section: dict[str, Any], where: str, path: Path | None
+) -> tuple[str, dict[str, Any], bool]:
+    """``[solver]``: the kind (one of the solver registry's), its validated settings
+    (see :mod:`surrogate.solvers`) and ``multi_fidelity`` (the built-in solver as the
+    fast prior of an external one; on by default)."""
     from ..solvers import available_solvers, get_solver
 
     settings = dict(section)
@@ -204,12 +217,17 @@ def _solver(section: dict[str, Any], where: str, path: Path | None) -> tuple[str
         raise InputDataError(
             f"{where}: [solver] kind must be one of {', '.join(kinds)}, got {kind!r}"
         )
+    multi_fidelity = settings.pop("multi_fidelity", True)
+    if not isinstance(multi_fidelity, bool):
+        raise InputDataError(
+            f"{where}: [solver] multi_fidelity must be true or false, got {multi_fidelity!r}"
+        )
     base = path.parent if path is not None else Path.cwd()
     for key in ("template", "workdir_root"):
         if isinstance(settings.get(key), str):
             settings[key] = str((base / settings[key]).resolve())
     try:
-        return kind, get_solver(kind).check_settings(settings)
+        return kind, get_solver(kind).check_settings(settings), multi_fidelity
     except InputDataError as error:
         raise InputDataError(f"{where}: {error}") from None
 

@@ -54,6 +54,7 @@ seed = 0
 [solver]
 kind = "test-scaled"
 scale = 2.0
+multi_fidelity = false   # the loop of the study's own solver (tests/test_fidelity.py: the other)
 
 [targets]
 f60_n = 19.9

@@ -1,0 +1,364 @@
+"""``calibrate``: fit the coating and the enabled effects to measured curves.
+
+The command over the loop's machinery (:mod:`._loop`; with an external full solver,
+:mod:`._fidelity`'s corrected built-in model): the study and its measurements loaded,
+the loop run, its best verified point judged (the first-order test, the F-test of the
+misfit against the noise, what the curves determine), and the verifications recorded
+as trials of ``<name>/calibrate/<model>`` with the result as the study's attribute.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import optuna
+from optuna.distributions import BaseDistribution
+
+from .._errors import InputDataError
+from .._log import show_progress
+from .._pool import check_jobs
+from ..solvers._fidelity import fidelity_record
+from ..storage._optuna import distributions, quiet_optuna
+from ..storage._storage import open_storage
+from ..study._spec import StudySpec
+from ._fidelity import LOW_FIDELITY_BUDGET, CorrectedCalibration, CorrectedRuns, CurveCorrection
+from ._local import LocalFit
+from ._loop import CalibrationLoop, SolverRuns, VerifiedPoint, determination_at
+from ._problem import (
+    CalibrationProblem,
+    calibration_study_name,
+    check_budget,
+    load_calibration,
+    model_label,
+)
+from ._statistics import SIGNIFICANCE
+
+__all__ = [
+    "CalibrationResult",
+    "calibrate",
+    "calibration_note",
+    "data_hash",
+    "run_calibration",
+]
+
+_LOG = logging.getLogger(__name__)
+
+
+# -- the result --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CalibrationResult:
+    """Keys of ``surrogate calibrate --json``.
+
+    ``params`` are the calibrated values (coating in the paper's units, effect
+    parameters as ``effect.param``); ``rmse_n`` the RMSE over all measured
+    points, verified by the full solver; ``solver_calls`` the full-solver runs
+    this calibration used (a run already in the result cache is not repeated).
+
+    ``status`` is ``converged`` only when the local phase's first-order test held
+    at ``params`` (a verified point; see :mod:`surrogate.calibration._local`), else
+    ``budget_exhausted`` (``params`` is then the best verified point).
+    ``predicted_gain`` is what that test measured: the relative RMSE decrease the
+    Gauss–Newton model still promises within ±5 % of each range (``None`` unless
+    ``converged``). With
+    ``converged``: ``misfit`` is ``"within the noise"`` or ``"systematic"`` by the
+    F-test of the RSS against the noise (``misfit_p_value``; systematic below
+    0.01), and ``determination`` says what the curves determine (the keys of
+    :class:`~surrogate.calibration._determination.Determination`: 95 % intervals of the
+    bending stiffness ``bending_stiffness_nmm`` [N·mm per unit width], the plastic
+    moment ``plastic_moment_n`` [N·mm/mm = N] and each parameter, the free
+    parameters, those held at a bound). Both are ``None`` unless ``converged``.
+
+    ``multi_fidelity`` (None for a built-in study): with an external full solver the
+    corrected built-in model is searched (:mod:`surrogate.calibration._fidelity`);
+    ``solver_calls`` counts the expensive runs, ``low_fidelity_runs`` the built-in ones,
+    ``correction`` is its size at ``params``, ``dropped`` why it was not trusted (then the
+    expensive solver's own local phase finished). ``converged`` then means: the
+    first-order test of the corrected model held at a point the expensive solver
+    verified, whose RMSE is the expensive solver's.
+    """
+
+    params: dict[str, float]
+    rmse_n: float
+    noise_n: float
+    solver_calls: int
+    effects: list[str]
+    rmse_per_test_n: dict[str, float]
+    status: str
+    predicted_gain: float | None
+    misfit: str | None
+    misfit_p_value: float | None
+    determination: dict[str, Any] | None
+    iterations: int
+    study: str
+    storage: str
+    message: str
+    multi_fidelity: dict[str, Any] | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+# -- the command -------------------------------------------------------------------------------
+def calibrate(
+    study: str | Path | StudySpec,
+    *,
+    effects: Sequence[str] | None = None,
+    plugins: Sequence[str] = (),
+    storage: str | None = None,
+    max_solver_calls: int | None = None,
+    jobs: int = 1,
+    progress: bool = True,
+    tests: Sequence[Any] | None = None,
+    record: bool = True,
+) -> CalibrationResult:
+    """Calibrate the coating and the enabled effects against the measured curves.
+
+    Parameters
+    ----------
+    study : path or StudySpec
+        A study with a ``[measurements]`` file.
+    effects : sequence of str, optional
+        Effects to enable; default: the study's ``[model] effects``.
+    plugins : sequence of str
+        Modules of user effects to import first (``--plugin``).
+    storage : str, optional
+        Optuna storage URL; default: the study's.
+    max_solver_calls : int, optional
+        Budget of full-solver runs, ≥ 10 (default: ``[budget] calibration_solver_calls``).
+    jobs : int
+        Worker processes for the runs of one verification (≥ 1).
+    progress : bool
+        Log each step at INFO (logger ``surrogate``; on stderr unless configured).
+    tests : sequence, optional
+        Calibrate on these tests only (used by the diagnosis).
+    record : bool
+        Keep the verifications as trials of ``<name>/calibrate/<model>``.
+
+    Returns
+    -------
+    CalibrationResult
+    """
+    return run_calibration(
+        study,
+        effects=effects,
+        plugins=plugins,
+        storage=storage,
+        max_solver_calls=max_solver_calls,
+        jobs=jobs,
+        progress=progress,
+        tests=tests,
+        record=record,
+    )[0]
+
+
+def run_calibration(
+    study: str | Path | StudySpec,
+    *,
+    effects: Sequence[str] | None = None,
+    plugins: Sequence[str] = (),
+    storage: str | None = None,
+    max_solver_calls: int | None = None,
+    jobs: int = 1,
+    progress: bool = True,
+    tests: Sequence[Any] | None = None,
+    record: bool = True,
+    correction: CurveCorrection | None = None,
+    expensive: bool = True,
+) -> tuple[CalibrationResult, CalibrationLoop]:
+    """:func:`calibrate`, and the loop it ran (the diagnosis reads its correction).
+
+    With an external full solver: ``correction`` starts the corrected built-in model
+    from earlier expensive runs; without ``expensive`` only that model is calibrated
+    (built-in runs, nothing verified by the expensive solver: the diagnosis's
+    recalibrations of candidates, never recorded).
+    """
+    check_jobs(jobs)
+    check_budget(max_solver_calls)  # bad options fail before anything is read or written
+    if progress:
+        show_progress()
+    spec, data, chosen, noise = load_calibration(study, effects, plugins)
+    problem = CalibrationProblem(spec, data, chosen, tests=tests)
+    cache = spec.directory / ".solver-cache"
+    budget = max_solver_calls or spec.budget.calibration_solver_calls
+    name = calibration_study_name(spec, chosen)
+    options = {"noise": noise, "progress": progress, "label": name}
+    loop: CalibrationLoop
+    if not spec.low_fidelity:
+        runs = SolverRuns(problem, cache, jobs=jobs)
+        loop = CalibrationLoop(problem, runs, budget=budget, **options)
+    elif expensive:
+        runs = SolverRuns(problem, cache, jobs=jobs)
+        loop = CorrectedCalibration(problem, runs, budget=budget, correction=correction, **options)
+    else:
+        runs = CorrectedRuns(problem, cache, jobs=jobs, correction=correction)
+        loop = CalibrationLoop(problem, runs, budget=LOW_FIDELITY_BUDGET, **options)
+    loop.run(spec.budget.surrogate_trials)
+    result = _result(loop, chosen, storage or spec.default_storage())
+    if record and expensive:
+        _record(result.storage, name, problem, loop.verified, result, data_hash(spec))
+    return result, loop
+
+
+def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> CalibrationResult:
+    """The result of a finished loop: its best verified point, and what the first-order
+    test and the statistics say there."""
+    problem, runs, name = loop.problem, loop.runs, loop.label
+    fit, best = loop.best_fit(), loop.best()
+    if best is None:
+        reason = runs.failures[0] if runs.failures else "no verification fitted in the budget"
+        raise InputDataError(
+            f"calibration of {name} found no parameter point the solver could run at every "
+            f"test ({reason}); check the parameter ranges"
+        )
+    # converged: the best verified point is a local optimum the first-order test passed
+    converged = fit is not None and fit.converged and fit.rmse <= best.rmse
+    misfit, p_value, determination = None, None, None
+    if fit is not None and converged:
+        p_value = loop.p_value(fit)
+        misfit = "within the noise" if p_value >= SIGNIFICANCE else "systematic"
+        determination = determination_at(problem, fit).to_json()
+    result = CalibrationResult(
+        params=dict(zip(problem.space.names, map(float, best.theta), strict=True)),
+        rmse_n=float(best.rmse),
+        noise_n=loop.noise,
+        solver_calls=runs.calls,
+        effects=list(effects),
+        rmse_per_test_n=best.per_test,
+        status="converged" if converged else "budget_exhausted",
+        predicted_gain=fit.predicted_gain if fit is not None and converged else None,
+        misfit=misfit,
+        misfit_p_value=p_value,
+        determination=determination,
+        iterations=loop.iterations,
+        study=name,
+        storage=url,
+        message="",
+    )
+    message = _message(problem, result, fit)
+    multi = _multi_fidelity(loop, best)
+    if multi is not None:
+        message += multi.pop("sentence")
+    return replace(result, message=message, multi_fidelity=multi)
+
+
+def _multi_fidelity(loop: CalibrationLoop, best: VerifiedPoint) -> dict[str, Any] | None:
+    """The ``multi_fidelity`` record with its sentence (None unless the loop corrected
+    the built-in model towards an external solver)."""
+    if not isinstance(loop, CorrectedCalibration):
+        return None
+    return fidelity_record(
+        loop.problem.spec.solver,
+        loop.low_fidelity_runs,
+        loop.correction_at(best),
+        loop.dropped,
+        loop.dropped_after,
+    )
+
+
+def _message(problem: CalibrationProblem, result: CalibrationResult, fit: LocalFit | None) -> str:
+    rmse, noise = result.rmse_n, result.noise_n
+    text = (
+        f"{model_label(result.effects)}: RMSE {rmse:.4g} N over {problem.n_points} points of "
+        f"{len(problem.test_ids)} tests, noise {noise:.4g} N ({rmse / noise:.2f}× noise), "
+        f"{result.solver_calls} solver calls, {result.status}"
+    )
+    if result.status != "converged":
+        reported = np.array(list(result.params.values()))
+        reported_is_fit = fit is not None and np.array_equal(fit.theta, reported)
+        why = (
+            fit.message
+            if fit is not None and reported_is_fit
+            else "no local fit ended at the best verified point"
+        )
+        return f"{text} ({why}; best verified point so far — raise --budget)"
+    assert result.determination is not None
+    return (
+        f"{text} ({fit.message if fit else ''}); {result.misfit} (F-test p = "
+        f"{result.misfit_p_value:.2g}); {result.determination['statement']}"
+    )
+
+
+def data_hash(spec: StudySpec) -> str:
+    """SHA-256 of the measurement file's bytes (which data a calibration saw)."""
+    assert spec.measurements_file is not None
+    return hashlib.sha256(Path(spec.measurements_file).read_bytes()).hexdigest()
+
+
+# -- the record in the Optuna storage -----------------------------------------------------------
+def _record(
+    url: str,
+    name: str,
+    problem: CalibrationProblem,
+    verified: list[VerifiedPoint],
+    result: CalibrationResult,
+    data_sha: str,
+) -> None:
+    """Verifications as trials of the study ``name``; the result as a study attribute."""
+    quiet_optuna()
+    study = optuna.create_study(study_name=name, storage=open_storage(url), load_if_exists=True)
+    known = {
+        t.user_attrs.get("verification_key")
+        for t in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
+    }
+    trial_distributions: dict[str, BaseDistribution] = dict(distributions(problem.space))
+    for item in verified:
+        key = hashlib.sha256("".join(item.keys).encode()).hexdigest()
+        if key in known:
+            continue
+        inside = problem.space.clip(item.theta)
+        params = dict(zip(problem.space.names, map(float, inside), strict=True))
+        known.add(key)
+        trial = optuna.trial.create_trial(
+            params=params,
+            distributions=trial_distributions,
+            value=item.rmse,
+            user_attrs={
+                "verification_key": key,
+                "phase": item.phase,
+                "predicted_rmse_n": item.predicted,
+                "rmse_per_test_n": item.per_test,
+                "solver_calls": item.calls,
+                "effects": list(problem.effects),
+                "data_sha256": data_sha,
+            },
+        )
+        study.add_trial(trial)
+    study.set_user_attr("result", json.loads(json.dumps(result.to_json())))
+    study.set_user_attr("data_sha256", data_sha)
+    _note(study, calibration_note(result.to_json()))
+
+
+def calibration_note(result: Mapping[str, Any]) -> list[str]:
+    """The calibration's status and what the curves determine, as Markdown lines
+    (the dashboard note of the calibration study; compare and diagnose repeat it)."""
+    lines = [f"## Calibration: {result['status']}", "", result["message"]]
+    determination = result.get("determination")
+    if determination:
+        lines += ["", "| quantity | value | 95 % interval |", "|---|---|---|"]
+        for key, c in determination["combinations"].items():
+            span = "not determined" if c["low"] is None else f"{c['low']:.4g} – {c['high']:.4g}"
+            lines.append(f"| {key} | {c['value']:.4g} | {span} |")
+        for name, value in result["params"].items():
+            interval = determination["intervals"].get(name)
+            span = (
+                "held at a bound" if interval is None else f"{interval[0]:.4g} – {interval[1]:.4g}"
+            )
+            free = " (free within its range)" if name in determination["free"] else ""
+            lines.append(f"| {name} | {value:.4g} | {span}{free} |")
+    return lines
+
+
+def _note(study: optuna.Study, lines: list[str]) -> None:
+    """Markdown note of the study in optuna-dashboard (skipped without it)."""
+    try:
+        from optuna_dashboard import save_note
+    except ImportError:
+        return
+    save_note(study, "\n".join(lines))

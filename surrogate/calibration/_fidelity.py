@@ -1,0 +1,313 @@
+"""``calibrate`` and ``diagnose`` with an external full solver: the corrected built-in model.
+
+The scheme's rules are :mod:`surrogate.solvers._fidelity`'s. Here:
+
+- :class:`CurveCorrection` — the discrepancy of whole curves, ``asinh(F_exp/s) −
+  asinh(F_builtin/s)`` at every angle (:class:`surrogate.gp.Discrepancy`, one output an
+  angle, one kernel), over the model state's features: learned on one model, it serves
+  the model with an effect added (the diagnosis's refits);
+- :class:`CorrectedRuns` — the calibration's :class:`~._loop.SolverRuns` on the built-in
+  solver, each curve corrected: what the global phase, the local phase and the
+  first-order test run on;
+- :class:`CorrectedCalibration` — the loop: (1) the corrected model calibrated as a
+  built-in study is (global phase, local phase, other basins: built-in runs only);
+  (2) its optimum verified by the expensive solver at every condition group — the runs
+  teach the correction; (3) the first-order test of the corrected model *at that
+  verified point*: ``converged`` when it holds; else the local phase on the corrected
+  model from there, and (2) again. Where the correction is too large or too irregular
+  it is dropped, and the expensive solver's own local phase finishes from the best
+  verified point.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..gp import Discrepancy, force_of_latent, latent_of_force, latent_slope
+from ..solvers._fidelity import (
+    Correction,
+    MissCounter,
+    correction_refused,
+    discrepancy_inputs,
+    low_fidelity_inputs,
+)
+from ._local import LocalFit, ResidualModel, SolverFailed, local_fit, optimum_test
+from ._loop import CalibrationLoop, SolverRuns, VerifiedPoint
+from ._problem import CalibrationProblem
+
+__all__ = ["CorrectedCalibration", "CorrectedRuns", "CurveCorrection"]
+
+CURVE_PRIOR_SD = 0.05  # asinh scale ≈ log F: before any expensive run, ~5 % apart
+CURVE_NOISE_SD = 1e-3  # the expensive curve's own scatter (mesh, increments): ~0.1 %
+LOW_FIDELITY_BUDGET = 1000  # built-in runs of the first, built-in-only calibration
+
+
+class CurveCorrection:
+    """``δ`` of whole curves (all angles but 0°, where both are zero by definition).
+
+    ``Z`` (n, k) and ``D`` (n, A − 1) are its training data — the discrepancy inputs
+    and the curves' difference on the asinh scale of every expensive run so far — kept
+    as plain arrays, so child processes rebuild the same correction.
+    """
+
+    def __init__(self, Z: np.ndarray | None = None, D: np.ndarray | None = None) -> None:
+        self.Z = np.empty((0, 0)) if Z is None else np.asarray(Z, dtype=float)
+        self.D = np.empty((0, 0)) if D is None else np.asarray(D, dtype=float)
+        self.gp = Discrepancy(CURVE_PRIOR_SD, noise_sd=CURVE_NOISE_SD)
+        if len(self.Z):
+            self.gp.fit(self.Z, self.D)
+
+    def learn(self, inputs: Mapping[str, Any], low_n: np.ndarray, high_n: np.ndarray) -> None:
+        """Add one expensive run: its inputs and both curves [N] on the same angles."""
+        z = discrepancy_inputs(inputs)[None, :]
+        d = (latent_of_force(high_n[1:]) - latent_of_force(low_n[1:]))[None, :]
+        self.Z = z if not len(self.Z) else np.vstack([self.Z, z])
+        self.D = d if not len(self.D) else np.vstack([self.D, d])
+        self.gp.fit(self.Z, self.D)
+
+    def apply(
+        self, low_n: np.ndarray, inputs: Mapping[str, Any], *, return_std: bool = False
+    ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """The built-in curve ``low_n`` [N] of a run corrected; with ``return_std`` also
+        the correction's standard deviation there [N]."""
+        z = discrepancy_inputs(inputs)[None, :]
+        latent = latent_of_force(low_n[1:])
+        corrected = np.zeros_like(low_n, dtype=float)
+        if not return_std:
+            corrected[1:] = force_of_latent(latent + self.gp.predict(z)[0])
+            return corrected
+        mean, sd = self.gp.predict(z, return_std=True)
+        corrected[1:] = force_of_latent(latent + mean[0])
+        std = np.zeros_like(corrected)
+        std[1:] = latent_slope(latent + mean[0]) * sd[0]
+        return corrected, std
+
+    @property
+    def n_runs(self) -> int:
+        return len(self.Z)
+
+
+class CorrectedRuns(SolverRuns):
+    """The built-in solver's runs of a problem, each curve corrected by ``correction``
+    (None: the plain built-in curves). Counts built-in runs."""
+
+    def __init__(
+        self,
+        problem: CalibrationProblem,
+        cache_dir: Path,
+        *,
+        jobs: int,
+        correction: CurveCorrection | None,
+    ) -> None:
+        super().__init__(problem, cache_dir, jobs=jobs)
+        self.correction = correction
+
+    def inputs(self, theta: Mapping[str, float], group: int) -> dict[str, Any]:
+        return low_fidelity_inputs(self.problem.inputs(theta, group))
+
+    def curve(self, result: Mapping[str, Any], inputs: Mapping[str, Any]) -> np.ndarray:
+        low = super().curve(result, inputs)
+        if self.correction is None:
+            return low
+        corrected = self.correction.apply(low, inputs)
+        assert isinstance(corrected, np.ndarray)
+        return corrected
+
+
+class CorrectedCalibration(CalibrationLoop):
+    """The calibration loop of a study whose full solver is external (module docstring).
+
+    ``runs`` are the expensive solver's (what the budget counts); ``verified`` and
+    ``fits`` only what the expensive solver verified, so the command judges and records
+    them as it does a built-in study's. ``correction`` may start from a diagnosis's
+    earlier expensive runs.
+    """
+
+    def __init__(
+        self,
+        problem: CalibrationProblem,
+        runs: SolverRuns,
+        *,
+        noise: float,
+        budget: int,
+        progress: bool,
+        label: str,
+        correction: CurveCorrection | None = None,
+    ) -> None:
+        super().__init__(problem, runs, noise=noise, budget=budget, progress=progress, label=label)
+        self.correction = correction or CurveCorrection()
+        self.low_used: set[str] = set()
+        self.misses = MissCounter()
+        self.dropped: str | None = None
+        self.dropped_after = 0
+        self.corrections: dict[str, Correction] = {}  # by the verified point's first key
+
+    # -- the runs -------------------------------------------------------------------------------
+    def corrected_runs(self, correction: CurveCorrection | None) -> CorrectedRuns:
+        return CorrectedRuns(
+            self.problem, self.runs.cache.directory, jobs=self.runs.jobs, correction=correction
+        )
+
+    def _counted(self, runs: CorrectedRuns) -> None:
+        self.low_used |= runs.used
+
+    @property
+    def low_fidelity_runs(self) -> int:
+        return len(self.low_used)
+
+    # -- the loop ------------------------------------------------------------------------------
+    def run(self, surrogate_trials: int) -> None:
+        theta = self._corrected_optimum(surrogate_trials)
+        G = len(self.problem.groups)
+        while theta is not None and self.runs.calls + G <= self.budget:
+            theta = self._step(theta)
+        if self.dropped is not None:
+            self._fall_back()
+
+    def _corrected_optimum(self, surrogate_trials: int) -> np.ndarray | None:
+        """The corrected model calibrated as a built-in study (built-in runs only)."""
+        low = self.corrected_runs(self.correction)
+        loop = CalibrationLoop(
+            self.problem,
+            low,
+            noise=self.noise,
+            budget=LOW_FIDELITY_BUDGET,
+            progress=self.progress,
+            label=f"{self.label} (built-in model)",
+        )
+        loop.run(surrogate_trials)
+        self._counted(low)
+        self.iterations += loop.iterations
+        start = loop.best_fit() or loop.best()
+        return None if start is None else np.asarray(start.theta, dtype=float)
+
+    def _step(self, theta: np.ndarray) -> np.ndarray | None:
+        """Verify ``theta`` with the expensive solver, learn from it, test it; the next
+        point to verify, or None when done (converged, failed or dropped)."""
+        predicted = self._predicted(theta)
+        point = self._verify(theta, predicted[2])
+        if point is None:
+            self._say("the expensive solver failed at the corrected model's optimum")
+            return None
+        self.verified[-1] = point = replace(point, phase="verified")
+        low = self._learn(point)
+        if self._distrusted(point, low, predicted):
+            return None
+        model = ResidualModel(self.problem, self.corrected_runs(self.correction))
+        try:
+            at = optimum_test(model, theta)
+        except SolverFailed as failed:
+            self._say(f"the built-in solver failed at the verified point: {failed}")
+            return None
+        self.fits.append(self._at_verified(at, point))
+        self._say(
+            f"verified: RMSE {point.rmse:.4g} N (predicted {predicted[2]:.4g}), "
+            f"{self.runs.calls} expensive runs; {at.message}"
+        )
+        if at.converged:
+            self._counted(model.runs)
+            return None
+        fit = local_fit(model, theta)
+        self._counted(model.runs)
+        self.iterations += 1
+        if np.array_equal(fit.theta, theta):
+            return None  # the corrected model finds nothing better to verify
+        return np.asarray(fit.theta, dtype=float)
+
+    def _predicted(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """The corrected model's curves (G, A) and their standard deviations at ``theta``
+        before it is verified, and the RMSE they predict."""
+        G = len(self.problem.groups)
+        low = self.corrected_runs(None)
+        out = low.run(np.repeat(theta[None, :], G, axis=0), list(range(G)))
+        self._counted(low)
+        names = self.problem.space.names
+        curves, stds = [], []
+        for g, run in enumerate(out):
+            if run is None:
+                return np.full((G, self.problem.angle_deg.size), np.nan), np.zeros(0), np.nan
+            inputs = self.problem.inputs(dict(zip(names, theta, strict=True)), g)
+            curve, std = self.correction.apply(run.curve, inputs, return_std=True)
+            curves.append(curve)
+            stds.append(std)
+        curves_array = np.array(curves)
+        return curves_array, np.array(stds), self.problem.rmse(curves_array)
+
+    def _learn(self, point: VerifiedPoint) -> list[dict[str, Any]]:
+        """Teach the correction the expensive runs of a verified point; the built-in
+        results of the same runs."""
+        G = len(self.problem.groups)
+        names = self.problem.space.names
+        plain = self.corrected_runs(None)
+        thetas = np.repeat(point.theta[None, :], G, axis=0)
+        lows = plain.run(thetas, list(range(G)))
+        self._counted(plain)
+        results = []
+        for g, (low, key) in enumerate(zip(lows, plain.keys(thetas, range(G)), strict=True)):
+            if low is None:
+                continue
+            inputs = self.problem.inputs(dict(zip(names, point.theta, strict=True)), g)
+            self.correction.learn(inputs, low.curve, point.curves[g])
+            results.append(plain.cache.get(key))
+        return results
+
+    def _distrusted(
+        self,
+        point: VerifiedPoint,
+        lows: list[dict[str, Any]],
+        predicted: tuple[np.ndarray, np.ndarray, float],
+    ) -> bool:
+        """The correction's rules at a verified point: its size, and whether the expensive
+        curves fell within what the corrected model predicted (sets ``dropped``)."""
+        highs = [self.runs.cache.get(key) for key in point.keys]
+        if len(lows) == len(highs) and all(h is not None for h in highs):
+            size = Correction.between(lows, highs)
+            self.corrections[point.keys[0]] = size
+            reason = correction_refused(size)
+            if reason is not None:
+                return self._drop(reason)
+        curves, stds, _ = predicted
+        if np.all(np.isfinite(curves)) and stds.size:
+            error = float(np.sqrt(np.mean((point.curves - curves) ** 2)))
+            sd = float(np.sqrt(np.mean(stds**2)))
+            if self.misses.judge(error, sd, self.noise):
+                return self._drop(self.misses.reason)
+        return False
+
+    def _drop(self, reason: str) -> bool:
+        self.dropped, self.dropped_after = reason, self.runs.calls
+        self._say(f"the correction is not trusted: {reason}")
+        return True
+
+    def _at_verified(self, at: LocalFit, point: VerifiedPoint) -> LocalFit:
+        """The test's fit at a verified point, with the expensive residual and curves
+        (the corrected model's agree with them there up to the correction's nugget)."""
+        message = (
+            f"{at.message} (the built-in model corrected towards "
+            f"{self.problem.spec.solver}, at a point {self.problem.spec.solver} verified)"
+        )
+        return replace(
+            at,
+            theta=point.theta,
+            residual=self.problem.residuals(point.curves),
+            curves=point.curves,
+            message=message,
+        )
+
+    def _fall_back(self) -> None:
+        """The expensive solver's own local phase from the best verified point."""
+        start = self.best()
+        G = len(self.problem.groups)
+        if start is None or self.runs.calls + G > self.budget:
+            return
+        self._say("the expensive solver's own local phase takes over")
+        self._local(ResidualModel(self.problem, self.runs, budget=self.budget), start)
+
+    def correction_at(self, point: VerifiedPoint | None) -> Correction | None:
+        """The size of the correction at a verified point (None if not measured)."""
+        return None if point is None else self.corrections.get(point.keys[0])

@@ -1,0 +1,203 @@
+"""The built-in solver as the low fidelity of an external full solver.
+
+For a study whose full solver is external (CalculiX, LS-DYNA), the built-in rod of the
+same test — same coating, rig, effects and conditions, through the one model-state
+path — is a fast prior of the expensive response: ``expensive ≈ built-in ⊕ δ``, with the
+discrepancy ``δ`` (:class:`surrogate.gp.Discrepancy`) learned from the expensive runs
+(Kennedy & O'Hagan 2000, on a log scale). The main job and the calibration search the
+corrected built-in model and ask the expensive solver only to verify a point or to teach
+``δ``. One place for the scheme's rules:
+
+- which studies use it (:func:`uses_low_fidelity`: an external solver, ``[solver]
+  multi_fidelity`` not switched off) and the low-fidelity counterpart of a run
+  (:func:`low_fidelity_inputs`);
+- ``δ``'s inputs (:func:`discrepancy_inputs`: the model state's features over their
+  spans, so ``δ`` learned on one model serves the model with an effect added); a curve's
+  ``δ`` lives on the calibration surrogate's scale (:func:`surrogate.gp.latent_of_force`,
+  logarithmic above a few hundredths of a newton);
+- the size of the correction at a point (:class:`Correction`) and when the correction is
+  not trusted (:func:`correction_refused`, :class:`MissCounter`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from ..study import Rig
+from ._base import get_solver
+from ._batch import solver_inputs
+from ._state import STATE_FEATURE_SPANS, model_state, state_features
+
+__all__ = [
+    "LOW_FIDELITY",
+    "MAX_CORRECTION",
+    "MISSES_IN_A_ROW",
+    "MISS_SIGMAS",
+    "Correction",
+    "MissCounter",
+    "correction_refused",
+    "discrepancy_inputs",
+    "fidelity_record",
+    "low_fidelity_inputs",
+    "uses_low_fidelity",
+]
+
+LOW_FIDELITY = "builtin"
+MAX_CORRECTION = 0.25  # a correction beyond 25 % of the curve: the built-in is no model of it
+MISS_SIGMAS = 3.0  # a prediction missed by more than this many of its standard deviations…
+MISSES_IN_A_ROW = 2  # …twice in a row (and by more than the caller's tolerance): too irregular
+
+
+def uses_low_fidelity(kind: str, multi_fidelity: bool) -> bool:
+    """Whether a study's runs go through the corrected built-in model: an external
+    solver (every kind but the built-in) with ``[solver] multi_fidelity`` on."""
+    return multi_fidelity and kind != LOW_FIDELITY
+
+
+def low_fidelity_inputs(inputs: Mapping[str, Any]) -> dict[str, Any]:
+    """The same run (coating, rig, effects, conditions) on the built-in solver."""
+    return solver_inputs(
+        dict(inputs["params"]),
+        Rig(**inputs["rig"]),
+        solver=LOW_FIDELITY,
+        effects=inputs.get("effects") or None,
+        conditions=inputs.get("conditions") or None,
+    )
+
+
+def discrepancy_inputs(inputs: Mapping[str, Any]) -> np.ndarray:
+    """``δ``'s inputs (k,) of a run: its model state's features in units of their spans."""
+    return state_features(model_state(inputs)) / STATE_FEATURE_SPANS
+
+
+def refusal(kind: str, state: Any) -> str | None:
+    """Why solver ``kind`` cannot model ``state``, or None (:meth:`Solver.refuses`)."""
+    return get_solver(kind).refuses(state)
+
+
+@dataclass(frozen=True)
+class Correction:
+    """The size of the correction at a point: expensive against built-in.
+
+    ``f60_percent`` ``100·(F60_exp/F60_builtin − 1)``; ``theta_sat_deg`` θsat_exp −
+    θsat_builtin; ``curve_rmse_n`` the RMS difference of the two curves over whole
+    degrees [N] and ``curve_rmse_relative`` that over the built-in curve's RMS (the worst
+    condition group where there are several).
+    """
+
+    f60_percent: float
+    theta_sat_deg: float
+    curve_rmse_n: float
+    curve_rmse_relative: float
+
+    def to_json(self) -> dict[str, float]:
+        return asdict(self)
+
+    @classmethod
+    def between(cls, low: Mapping[str, Any] | list[Mapping[str, Any]], high: Any) -> Correction:
+        """From the plain-JSON results of the two solvers (lists: one per condition
+        group; the group with the largest relative curve difference is reported)."""
+        lows = low if isinstance(low, list) else [low]
+        highs = high if isinstance(high, list) else [high]
+        sizes = [_size(lo, hi) for lo, hi in zip(lows, highs, strict=True)]
+        return max(sizes, key=lambda size: size.curve_rmse_relative)
+
+    def describe(self, expensive: str) -> str:
+        return (
+            f"{expensive} against the built-in solver: F60 {self.f60_percent:+.2f} %, "
+            f"θsat {self.theta_sat_deg:+.0f}°, curve RMSE {self.curve_rmse_n:.3g} N "
+            f"({100 * self.curve_rmse_relative:.2g} %)"
+        )
+
+
+def _size(low: Mapping[str, Any], high: Mapping[str, Any]) -> Correction:
+    angle = np.asarray(low["angle_deg"], dtype=float)
+    lo = np.asarray(low["force_n"], dtype=float)
+    hi = np.interp(angle, high["angle_deg"], high["force_n"])
+    rmse = float(np.sqrt(np.mean((hi - lo) ** 2)))
+    scale = float(np.sqrt(np.mean(lo**2)))
+    return Correction(
+        f60_percent=100.0 * (high["f60_n"] / low["f60_n"] - 1.0),
+        theta_sat_deg=float(high["theta_sat_deg"] - low["theta_sat_deg"]),
+        curve_rmse_n=rmse,
+        curve_rmse_relative=rmse / scale if scale > 0 else float("inf"),
+    )
+
+
+def correction_refused(size: Correction) -> str | None:
+    """Why a correction of this size is not trusted (None: it is): beyond
+    ``MAX_CORRECTION`` of the curve the built-in solver is no model of the expensive one."""
+    if size.curve_rmse_relative > MAX_CORRECTION:
+        return (
+            f"the expensive curve differs from the built-in one by "
+            f"{100 * size.curve_rmse_relative:.0f} % of its RMS (F60 {size.f60_percent:+.1f} %), "
+            f"more than the {100 * MAX_CORRECTION:.0f} % the correction is trusted for"
+        )
+    return None
+
+
+class MissCounter:
+    """The irregularity rule: an expensive run the corrected model predicted (before
+    the run, from the runs so far) is a *miss* when its error exceeds ``MISS_SIGMAS``
+    predicted standard deviations and the caller's tolerance; ``MISSES_IN_A_ROW``
+    misses in a row mean ``δ`` is too irregular for its GP."""
+
+    def __init__(self) -> None:
+        self.in_a_row = 0
+        self.last: str | None = None
+
+    def judge(self, error: float, sd: float, tolerance: float) -> bool:
+        """Record one prediction's ``error`` against its ``sd``; True when the rule now
+        says the correction is too irregular."""
+        miss = abs(error) > max(MISS_SIGMAS * sd, tolerance)
+        self.in_a_row = self.in_a_row + 1 if miss else 0
+        if miss:
+            self.last = (
+                f"an expensive run missed the corrected model's prediction by {abs(error):.3g} "
+                f"({abs(error) / max(sd, 1e-300):.1f} standard deviations)"
+            )
+        return self.in_a_row >= MISSES_IN_A_ROW
+
+    @property
+    def reason(self) -> str:
+        return (
+            f"{MISSES_IN_A_ROW} expensive runs in a row missed the corrected model's "
+            f"prediction by more than {MISS_SIGMAS:g} standard deviations and the tolerance "
+            f"(the last: {self.last}): the discrepancy is too irregular for its GP"
+        )
+
+
+def fidelity_record(
+    kind: str,
+    low_fidelity_runs: int,
+    correction: Correction | None,
+    dropped: str | None,
+    dropped_after: int,
+) -> dict[str, Any]:
+    """The ``multi_fidelity`` key of ``run --json`` and ``calibrate --json``, and the
+    sentence (``sentence``) their message ends with: the built-in runs spent and the size
+    of the correction at the answer — or why the correction was dropped."""
+    if dropped is not None:
+        sentence = (
+            f". The built-in solver was dropped as the prior after {dropped_after} {kind} "
+            f"runs: {dropped}; the single-fidelity loop took over"
+        )
+    else:
+        sentence = (
+            f" (and {low_fidelity_runs} built-in runs as the prior: the searched model is the "
+            f"built-in solver corrected towards {kind})"
+        )
+        if correction is not None:
+            sentence += f"; at the answer {correction.describe(kind)}"
+    return {
+        "low_fidelity": LOW_FIDELITY,
+        "low_fidelity_runs": low_fidelity_runs,
+        "correction": None if correction is None else correction.to_json(),
+        "dropped": dropped,
+        "dropped_after": dropped_after if dropped is not None else None,
+        "sentence": sentence,
+    }
