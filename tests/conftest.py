@@ -42,3 +42,6 @@ class CountingSolve:
             raise KeyboardInterrupt
         self.calls += 1
         return solve_inputs(inputs)
+
+
+from tests.fidelity import distorted_solver  # noqa: E402, F401  (a fixture: the test-only solver)

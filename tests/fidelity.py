@@ -10,7 +10,8 @@ with ``D`` the coat's bending stiffness [N·mm], ``θ`` the rotation. The defaul
 CalculiX's coarse mesh differs from the built-in rod by (README, cross-check), so the
 multi-fidelity correction has a known, smooth target; ``offset`` beyond the trusted
 correction and ``rough`` (a ripple in D far shorter than the discrepancy's length
-scale) make the two cases it must refuse. Every run appends its input hash to the
+scale) make the two cases it must refuse. Like CalculiX it refuses a bare-webbing
+stiffness (``membrane_bending``). Every run appends its input hash to the
 file named by ``$SURROGATE_TEST_SOLVER_LOG`` (when set), so a test counts the
 expensive runs.
 """
@@ -25,7 +26,7 @@ import pytest
 
 from surrogate.physics import bending_stiffness
 from surrogate.solvers import get_solver, model_state
-from surrogate.solvers._base import _REGISTRY, Solver, ok_result
+from surrogate.solvers._base import _REGISTRY, Solver, failed_result, ok_result
 from surrogate.solvers._cache import input_hash
 
 LOG_VARIABLE = "SURROGATE_TEST_SOLVER_LOG"
@@ -40,11 +41,20 @@ class DistortedSolver(Solver):
     version: ClassVar[str] = "test-distorted-1"
     settings_keys: ClassVar[tuple[str, ...]] = ("offset", "slope", "bend", "rough")
 
+    def refuses(self, state: Any) -> str | None:
+        """Like CalculiX, no bare-webbing stiffness: a diagnosis skips membrane_bending."""
+        if state.extra_stiffness_nmm:
+            return "the test-distorted solver has no bare-webbing bending stiffness"
+        return None
+
     def solve(self, inputs: dict[str, Any]) -> dict[str, Any]:
         log = os.environ.get(LOG_VARIABLE)
         if log:
             with open(log, "a", encoding="utf-8") as handle:
                 handle.write(f"{input_hash(inputs)}\n")
+        refused = self.refuses(model_state(inputs))
+        if refused is not None:
+            return failed_result(refused)
         settings = {"offset": -0.03, "slope": 0.01, "bend": 0.02, "rough": 0.0}
         settings.update(inputs.get("solver_settings") or {})
         plain = {k: v for k, v in inputs.items() if k != "solver_settings"}

@@ -42,7 +42,7 @@ import json
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -53,12 +53,15 @@ from .._errors import InputDataError
 from .._log import show_progress
 from .._pool import check_jobs, imap_unordered, worker_count
 from ..effects import available_effects, get_effect
+from ..solvers import get_solver
+from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import quiet_optuna
 from ..storage._storage import open_storage
-from ._calibrate import calibrate, calibration_note
+from ._calibrate import CalibrationResult, calibration_note, run_calibration
 from ._compare import BANDS, angle_bands
+from ._fidelity import CorrectedCalibration, CorrectedRuns, CurveCorrection
 from ._local import ResidualModel, SolverFailed, local_fit
-from ._loop import SolverRuns
+from ._loop import CalibrationLoop, SolverRuns
 from ._problem import (
     CalibrationProblem,
     calibration_study_name,
@@ -81,6 +84,7 @@ from ._statistics import (
 __all__ = ["DiagnosisResult", "diagnose", "ladder_figure", "model_ladder", "write_ladder_plot"]
 
 _LOCAL_EVALS = 40  # residual evaluations of one local refit (each G solver runs)
+CONFIRM_ROUNDS = 2  # rounds of confirming the leaders with an expensive solver
 LOO_PRIOR_UNIT = 0.05  # prior SD of a parameter in the held-out refits, fraction of its range
 
 _LOG = logging.getLogger(__name__)
@@ -93,6 +97,14 @@ class DiagnosisResult:
     ``ranking`` is best first; ``tied_with`` lists the candidates that fit as
     well as the first (ΔBIC within 10 of it); ``follows`` the columns the
     residual follows, strongest first; ``ladder`` every calibration of the study.
+
+    ``multi_fidelity`` (None for a built-in study): the candidates were refitted on
+    the built-in model corrected towards the external solver, and only the leaders
+    were confirmed on it — ``confirmed`` (their ranking entries carry
+    ``confirmed_by``: RMSE, held-out RMSE and ΔBIC from expensive-verified
+    calibrations), ``skipped`` (effects the expensive solver cannot model, with the
+    reason), ``low_fidelity_runs``, ``correction`` (its size at the current model's
+    calibrated point), ``dropped``. ``solver_calls`` counts the expensive runs.
     """
 
     rmse_n: float
@@ -109,6 +121,7 @@ class DiagnosisResult:
     heldout_rmse_n: float
     solver_calls: int
     ladder: list[dict[str, Any]]
+    multi_fidelity: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -144,12 +157,19 @@ def diagnose(
         show_progress()
     spec, data, chosen, noise = load_calibration(study, effects, plugins)
     url = storage or spec.default_storage()
-    fitted = calibrate(spec, effects=chosen, storage=url, progress=progress)
+    fitted, loop = run_calibration(spec, effects=chosen, storage=url, progress=progress)
     problem = CalibrationProblem(spec, data, chosen)
     say = _Say(progress, f"{spec.name}/diagnose")
-    refits = _Refits(problem, chosen, noise, fitted.params, jobs=jobs, say=say)
-    refits.refit_all(_candidates(problem, chosen, candidates))
-    misfit = _misfit(problem, refits.current, noise)
+    correction = _correction(loop, say)
+    names, skipped = _candidates(problem, chosen, candidates, fitted.params)
+    for effect, reason in skipped.items():
+        say(f"{effect} skipped: {reason}")
+    refits = _Refits(
+        problem, chosen, noise, fitted.params, jobs=jobs, say=say, correction=correction
+    )
+    refits.refit_all(names)
+    current = refits.current if correction is None else _verified_refit(problem, loop, noise)
+    misfit = _misfit(problem, current, noise)
     say(
         f"model {model_label(chosen)}: RMSE {misfit.rmse:.4g} N, noise {noise:.4g} N, "
         f"{'systematic' if misfit.systematic else 'within the noise'} "
@@ -158,12 +178,82 @@ def diagnose(
     ranking = refits.ranking()
     if misfit.systematic and ranking:
         ranking = refits.recalibrate(ranking)
+        if correction is not None:
+            ranking = refits.confirm(ranking, current, fitted)
     name = calibration_study_name(spec, chosen)
-    _record_heldout(url, name, refits.current.heldout_rmse)
-    result = _result(misfit, ranking, refits, fitted.solver_calls, model_ladder(url, spec.name))
+    _record_heldout(url, name, current.heldout_rmse)
+    result = _result(
+        misfit, ranking, refits, current, fitted.solver_calls, model_ladder(url, spec.name)
+    )
+    if correction is not None:
+        result = _with_fidelity(result, refits, loop, fitted, skipped)
     _attach_ladder(url, name, result, fitted.to_json())
     say(result.verdict)
     return result
+
+
+def _correction(loop: CalibrationLoop, say: _Say) -> CurveCorrection | None:
+    """The correction the current model's calibration learned (None for a built-in study,
+    or where it was dropped: then the candidates are refitted with the full solver)."""
+    if not isinstance(loop, CorrectedCalibration):
+        return None
+    if loop.dropped is not None:
+        say(
+            "the correction was dropped in the calibration: the candidates are refitted "
+            f"with {loop.problem.spec.solver} itself"
+        )
+        return None
+    return loop.correction
+
+
+def _verified_refit(problem: CalibrationProblem, loop: CalibrationLoop, noise: float) -> _Refit:
+    """The current model at its expensive-verified calibrated point, as a refit: the
+    expensive residual, the corrected model's Jacobian for the held-out error."""
+    fit = loop.best_fit()
+    assert fit is not None  # a corrected calibration tests every point it verifies
+    return _Refit(
+        None,
+        fit.theta,
+        dict(zip(problem.space.names, map(float, fit.theta), strict=True)),
+        fit.residual,
+        fit.curves,
+        _heldout(problem, fit.residual, fit.jacobian, fit.at_bound, noise),
+        set(),
+    )
+
+
+def _with_fidelity(
+    result: DiagnosisResult,
+    refits: _Refits,
+    loop: CalibrationLoop,
+    fitted: CalibrationResult,
+    skipped: dict[str, str],
+) -> DiagnosisResult:
+    """The multi-fidelity record of a diagnosis, and its verdict's last words."""
+    assert isinstance(loop, CorrectedCalibration)
+    kind = loop.problem.spec.solver
+    record = fidelity_record(
+        kind,
+        loop.low_fidelity_runs + refits.low_fidelity_runs,
+        loop.correction_at(loop.best()),
+        None,
+        0,
+    )
+    record.pop("sentence")
+    record["confirmed"] = list(refits.confirmed)
+    record["skipped"] = [{"effect": e, "reason": r} for e, r in skipped.items()]
+    verdict = result.verdict + (
+        f" (candidates refitted on the built-in model corrected towards {kind}"
+        + (f"; confirmed on {kind}: {', '.join(refits.confirmed)}" if refits.confirmed else "")
+        + (f"; skipped, {kind} cannot model them: {', '.join(skipped)}" if skipped else "")
+        + ")"
+    )
+    return replace(
+        result,
+        verdict=verdict,
+        solver_calls=fitted.solver_calls + refits.expensive_calls,
+        multi_fidelity=record,
+    )
 
 
 @dataclass(frozen=True)
@@ -232,11 +322,12 @@ def _result(
     misfit: _Misfit,
     ranking: list[Candidate],
     refits: _Refits,
+    current: _Refit,
     calibration_calls: int,
     ladder: list[dict[str, Any]],
 ) -> DiagnosisResult:
     """The verdict over the ranked candidates, as the command's record."""
-    heldout = refits.current.heldout_rmse
+    heldout = current.heldout_rmse
     # candidates not decisively worse than the best: the data cannot tell them apart
     tied_with = [c.effect for c in ranking[1:] if tied(c, ranking[0])]
     is_named = misfit.systematic and bool(ranking) and named(ranking[0], heldout)
@@ -276,6 +367,11 @@ class _Refits:
     ``refits`` maps an effect (``None``: the current model) to its best refit so far;
     ``used`` is every result-cache key the refits ran; ``solver_calls`` the runs of the
     recalibrations over the whole space.
+
+    With a ``correction`` (an external full solver) the refits and recalibrations run on
+    the built-in model corrected towards it (their runs are built-in ones), and
+    :meth:`confirm` calibrates the leaders with the expensive solver
+    (``expensive_calls``, ``confirmed``).
     """
 
     def __init__(
@@ -287,13 +383,26 @@ class _Refits:
         *,
         jobs: int | None,
         say: _Say,
+        correction: CurveCorrection | None = None,
     ) -> None:
         self.problem, self.chosen, self.noise, self.params = problem, chosen, noise, params
-        self.jobs, self.say = jobs, say
+        self.jobs, self.say, self.correction = jobs, say, correction
         self.refits: dict[str | None, _Refit] = {}
         self.names: list[str] = []
         self.used: set[str] = set()
         self.solver_calls = 0
+        self.expensive_calls = 0
+        self.confirmed: list[str] = []
+        self._confirmation_low_runs = 0
+
+    @property
+    def _correction_data(self) -> tuple[np.ndarray, np.ndarray] | None:
+        return None if self.correction is None else (self.correction.Z, self.correction.D)
+
+    @property
+    def low_fidelity_runs(self) -> int:
+        """Built-in runs of the refits and recalibrations on the corrected model."""
+        return len(self.used) + self.solver_calls + self._confirmation_low_runs
 
     @property
     def current(self) -> _Refit:
@@ -305,11 +414,11 @@ class _Refits:
         # like with like; the refits are independent, one process each
         spec, data, noise = self.problem.spec, self.problem.data, self.noise
         self.names = list(names)
-        tasks: list[tuple[Any, ...]] = [(spec, data, self.chosen, None, self.params, noise)]
-        tasks += [(spec, data, (*self.chosen, n), n, self.params, noise) for n in names]
-        self.say(
-            f"refitting the model and {len(names)} candidate effects locally with the full solver"
-        )
+        fix = self._correction_data
+        tasks: list[tuple[Any, ...]] = [(spec, data, self.chosen, None, self.params, noise, fix)]
+        tasks += [(spec, data, (*self.chosen, n), n, self.params, noise, fix) for n in names]
+        model = "the full solver" if fix is None else "the corrected built-in model"
+        self.say(f"refitting the model and {len(names)} candidate effects locally with {model}")
         for _, refit in imap_unordered(_refit, tasks, worker_count(self.jobs, len(tasks))):
             self.refits[refit.effect] = refit
             self.used |= refit.used
@@ -358,7 +467,8 @@ class _Refits:
     def _recalibrate_all(self, names: list[str]) -> None:
         self.say(f"recalibrating with {', '.join(names)} over the whole parameter space")
         spec, data = self.problem.spec, self.problem.data
-        tasks = [(spec, data, (*self.chosen, name), name, self.noise) for name in names]
+        fix = self._correction_data
+        tasks = [(spec, data, (*self.chosen, name), name, self.noise, fix) for name in names]
         for _, (again, calls) in imap_unordered(
             _recalibrate, tasks, worker_count(self.jobs, len(tasks))
         ):
@@ -368,6 +478,59 @@ class _Refits:
             self.used |= again.used
             if again.rmse < self.refits[again.effect].rmse:
                 self.refits[again.effect] = again
+
+    def confirm(
+        self, ranking: list[Candidate], current: _Refit, fitted: CalibrationResult
+    ) -> list[Candidate]:
+        """The leaders — the first and those tied with it — calibrated with the expensive
+        solver (the corrected model searched, its optimum verified, the correction going
+        on from the current model's): their entries' RMSE, held-out RMSE and ΔBIC against
+        the current model's verified calibration then are the expensive solver's. Until
+        the leaders are confirmed, or ``CONFIRM_ROUNDS`` rounds."""
+        for _ in range(CONFIRM_ROUNDS):
+            todo = [c for c in ranking if tied(c, ranking[0]) and c.confirmed_by is None]
+            if not todo:
+                break
+            self.say(f"confirming {', '.join(c.effect for c in todo)} on the expensive solver")
+            confirmed = {c.effect: self._confirmed(c, current) for c in todo}
+            ranking = sorted(
+                (confirmed.get(c.effect) or c for c in ranking), key=lambda c: c.delta_bic
+            )
+        return ranking
+
+    def _confirmed(self, candidate: Candidate, current: _Refit) -> Candidate:
+        """One candidate calibrated with the expensive solver, as a ranking entry."""
+        assert self.correction is not None
+        problem = CalibrationProblem(
+            self.problem.spec, self.problem.data, (*self.chosen, candidate.effect)
+        )
+        found, loop = run_calibration(
+            self.problem.spec,
+            effects=(*self.chosen, candidate.effect),
+            progress=False,
+            record=False,
+            correction=CurveCorrection(self.correction.Z, self.correction.D),
+        )
+        self.expensive_calls += found.solver_calls
+        if found.multi_fidelity is not None:
+            self._confirmation_low_runs += found.multi_fidelity["low_fidelity_runs"]
+        self.confirmed.append(candidate.effect)
+        verified = _verified_refit(problem, loop, self.noise)
+        n_points = self.problem.n_points
+        base = bic(float(current.residual @ current.residual), n_points, len(current.theta))
+        rss = float(verified.residual @ verified.residual)
+        self.say(
+            f"+ {candidate.effect} on the expensive solver: RMSE {verified.rmse:.4g} N, "
+            f"{found.solver_calls} runs"
+        )
+        return Candidate(
+            effect=candidate.effect,
+            rmse_n=math.sqrt(rss / n_points),
+            heldout_rmse_n=verified.heldout_rmse,
+            delta_bic=bic(rss, n_points, len(verified.theta)) - base,
+            params=found.params,
+            confirmed_by=self.problem.spec.solver,
+        )
 
 
 def _attach_ladder(
@@ -452,10 +615,16 @@ class _Refit:
 
 
 def _refit(task: tuple[Any, ...]) -> _Refit:
-    """Refit ``effects`` locally from the calibrated point (a candidate starts switched off)."""
-    spec, data, effects, effect, params, noise = task
+    """Refit ``effects`` locally from the calibrated point (a candidate starts switched off),
+    with the full solver or, given a correction's data, the corrected built-in model."""
+    spec, data, effects, effect, params, noise, fix = task
     problem = CalibrationProblem(spec, data, effects)
-    runs = SolverRuns(problem, spec.directory / ".solver-cache", jobs=1)
+    cache = spec.directory / ".solver-cache"
+    runs = (
+        SolverRuns(problem, cache, jobs=1)
+        if fix is None
+        else CorrectedRuns(problem, cache, jobs=1, correction=CurveCorrection(*fix))
+    )
     fit = _local_fit(problem, runs, _start(problem, params), noise=noise)
     return _Refit(
         effect,
@@ -469,11 +638,20 @@ def _refit(task: tuple[Any, ...]) -> _Refit:
 
 
 def _recalibrate(task: tuple[Any, ...]) -> tuple[_Refit | None, int]:
-    """:func:`calibrate` with the effect added (not a ladder step), then refitted locally."""
-    spec, data, effects, effect, noise = task
+    """:func:`calibrate` with the effect added (not a ladder step), then refitted locally
+    (given a correction's data: on the corrected built-in model only)."""
+    spec, data, effects, effect, noise, fix = task
     try:
-        found = calibrate(spec, effects=effects, progress=False, record=False)
-        return _refit((spec, data, effects, effect, found.params, noise)), found.solver_calls
+        found, _ = run_calibration(
+            spec,
+            effects=effects,
+            progress=False,
+            record=False,
+            correction=None if fix is None else CurveCorrection(*fix),
+            expensive=fix is None,
+        )
+        refit = _refit((spec, data, effects, effect, found.params, noise, fix))
+        return refit, found.solver_calls
     except (InputDataError, _Failed):
         return None, 0  # the solver failed wherever the search looked: keep the local refit
 
@@ -547,11 +725,16 @@ def _heldout(
 
 
 def _candidates(
-    problem: CalibrationProblem, chosen: Sequence[str], names: Sequence[str] | None
-) -> list[str]:
-    """Effects to try: not in the model, and each condition they read varies in the data."""
+    problem: CalibrationProblem,
+    chosen: Sequence[str],
+    names: Sequence[str] | None,
+    params: dict[str, float],
+) -> tuple[list[str], dict[str, str]]:
+    """Effects to try: not in the model, and each condition they read varies in the data;
+    and those skipped because the study's full solver cannot model them (with why)."""
     table = problem.data.tests
-    out = []
+    out: list[str] = []
+    skipped: dict[str, str] = {}
     for name in names if names is not None else available_effects():
         if name in chosen:
             continue
@@ -561,8 +744,24 @@ def _candidates(
             continue  # nothing in the data can show it
         if any(c not in table for c in effect.reads if c not in ("width_mm",)):
             continue
+        refused = _refused(problem, (*chosen, name), params)
+        if refused is not None:
+            skipped[name] = refused
+            continue
         out.append(name)
-    return out
+    return out, skipped
+
+
+def _refused(
+    problem: CalibrationProblem, effects: tuple[str, ...], params: dict[str, float]
+) -> str | None:
+    """Why the study's full solver cannot model the model with ``effects`` (its new
+    parameters at mid-range, switched on), or None."""
+    model = CalibrationProblem(problem.spec, problem.data, effects)
+    theta = np.array(
+        [params[p.name] if p.name in params else float(p.from_unit(0.5)) for p in model.space]
+    )
+    return get_solver(problem.spec.solver).refuses(model.state(theta, 0))
 
 
 def _start(problem: CalibrationProblem, params: dict[str, float]) -> np.ndarray:

@@ -35,6 +35,7 @@ from ..solvers._fidelity import (
     correction_refused,
     discrepancy_inputs,
     low_fidelity_inputs,
+    too_rough,
 )
 from ._local import LocalFit, ResidualModel, SolverFailed, local_fit, optimum_test
 from ._loop import CalibrationLoop, SolverRuns, VerifiedPoint
@@ -277,6 +278,12 @@ class CorrectedCalibration(CalibrationLoop):
             sd = float(np.sqrt(np.mean(stds**2)))
             if self.misses.judge(error, sd, self.noise):
                 return self._drop(self.misses.reason)
+        if self.correction.gp.selected:
+            slope = latent_slope(latent_of_force(point.curves[:, 1:]))
+            scatter = float(np.sqrt(np.mean((slope * self.correction.gp.scatter) ** 2)))
+            reason = too_rough(scatter, self.noise, what="N")
+            if reason is not None:
+                return self._drop(reason)
         return False
 
     def _drop(self, reason: str) -> bool:

@@ -210,6 +210,7 @@ class Candidate:
     heldout_rmse_n: float
     delta_bic: float
     params: dict[str, float]
+    confirmed_by: str | None = None  # the expensive solver whose runs the figures are
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)

@@ -13,8 +13,11 @@ Z      (n, k) inputs of the expensive runs, in units of the span over which the
        response typically changes (the caller scales them).
 D      (n, m) discrepancies at ``Z``: ``m`` outputs (a scalar feature: ``m = 1``; a curve:
        one output per angle) sharing one kernel.
-R      (n, n) Matérn 5/2 correlation of ``Z``, one length scale ``ℓ`` for every input and
-       output, with the nugget ``g`` (noise over amplitude) on its diagonal.
+R      (n, n) correlation of ``Z``, one kernel for every output: a Matérn 5/2 of one length
+       scale ``ℓ`` plus a linear part ``c·(z − z̄)ᵀ(z' − z̄)`` (``z̄`` the runs' mean
+       input: a slope in each input, of prior standard deviation ``√c`` amplitudes per
+       unit — a discrepancy that follows one input and not the others needs no length
+       scale per input), with the nugget ``g`` (noise over amplitude) on its diagonal.
 μ      (m,) constant mean of each output by generalised least squares,
        ``(1ᵀR⁻¹D)/(1ᵀR⁻¹1)``: with one run, that run's discrepancy.
 s²     (m,) amplitude of each output: the prior ``s₀²`` worth ``PRIOR_RUNS`` runs,
@@ -25,9 +28,9 @@ At ``z``, with ``r`` its correlation to ``Z``: mean ``μ + rᵀR⁻¹(D − μ)`
 ``s²·(1 + g − rᵀR⁻¹r + (1 − 1ᵀR⁻¹r)² / 1ᵀR⁻¹1)`` (ordinary kriging: the uncertainty of
 ``μ`` included, so far from every run the variance is the prior's, not zero).
 
-``ℓ`` and ``g`` are fixed (``LENGTH_SCALE``; the nugget of the caller's ``noise_sd``)
-until ``SELECT_FROM`` runs; from then on they are the pair of a small grid with the
-largest restricted likelihood, summed over the outputs.
+``ℓ``, ``c`` and ``g`` are fixed (``LENGTH_SCALE``, ``SLOPE``; the nugget of the caller's
+``noise_sd``) until ``SELECT_FROM`` runs; from then on they are those of a small grid
+with the largest restricted likelihood, summed over the outputs.
 """
 
 from __future__ import annotations
@@ -41,22 +44,33 @@ from scipy.spatial.distance import cdist
 __all__ = ["Discrepancy"]
 
 LENGTH_SCALE = 1.0  # the input span over which the discrepancy may change by its amplitude
+SLOPE = 1.0  # prior variance of its slope in each input, in amplitudes² per unit²
 PRIOR_RUNS = 2.0  # weight of the prior amplitude, in runs
 SELECT_FROM = 4  # runs from which ℓ and g are chosen by restricted likelihood
 LENGTH_GRID = (0.25, 0.5, 1.0, 2.0, 4.0)
+SLOPE_GRID = (0.0, 0.25, 1.0, 4.0)
 NUGGET_GRID = (1e-4, 1e-2, 1e-1)  # above the caller's noise: a rough discrepancy
 _JITTER = 1e-10
 
 
-def _matern52(A: np.ndarray, B: np.ndarray, length: float) -> np.ndarray:
-    r = np.sqrt(5.0) * cdist(A, B) / length
-    return (1.0 + r + r**2 / 3.0) * np.exp(-r)
+@dataclass(frozen=True)
+class _Kernel:
+    """Matérn 5/2 of length ``length`` plus ``slope·(a − centre)ᵀ(b − centre)``."""
+
+    length: float
+    slope: float
+    centre: np.ndarray
+
+    def __call__(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        r = np.sqrt(5.0) * cdist(A, B) / self.length
+        linear = self.slope * (A - self.centre) @ (B - self.centre).T
+        return (1.0 + r + r**2 / 3.0) * np.exp(-r) + linear
 
 
 @dataclass(frozen=True)
 class _Fitted:
     Z: np.ndarray
-    length: float
+    kernel: _Kernel
     nugget: float
     factor: tuple[np.ndarray, bool]
     ones: np.ndarray  # R⁻¹1
@@ -64,6 +78,7 @@ class _Fitted:
     mean: np.ndarray  # μ (m,)
     alpha: np.ndarray  # R⁻¹(D − μ) (n, m)
     amplitude: np.ndarray  # s (m,)
+    scale: np.ndarray  # the runs' own amplitude, (D − μ)ᵀR⁻¹(D − μ)/(n − 1) (m,), its square root
 
 
 class Discrepancy:
@@ -90,11 +105,30 @@ class Discrepancy:
 
     @property
     def length_scale(self) -> float:
-        return LENGTH_SCALE if self._fitted is None else self._fitted.length
+        return LENGTH_SCALE if self._fitted is None else self._fitted.kernel.length
+
+    @property
+    def slope(self) -> float:
+        return SLOPE if self._fitted is None else self._fitted.kernel.slope
 
     @property
     def nugget(self) -> float:
         return self._min_nugget() if self._fitted is None else self._fitted.nugget
+
+    @property
+    def scatter(self) -> np.ndarray:
+        """What the fit attributes to noise, per output (m,): ``σ̂·√g`` with ``σ̂`` the runs'
+        own amplitude (the restricted-likelihood estimate, no prior in it), so runs that
+        hardly differ are not called noisy by a prior amplitude — the nugget being the
+        likelihood's choice from ``SELECT_FROM`` runs on."""
+        if self._fitted is None:
+            return self.noise_sd * np.ones_like(self.prior_sd)
+        return self._fitted.scale * np.sqrt(self._fitted.nugget)
+
+    @property
+    def selected(self) -> bool:
+        """Whether ``ℓ`` and ``g`` were chosen by the runs' likelihood."""
+        return self.n_runs >= SELECT_FROM
 
     def _min_nugget(self) -> float:
         return float(np.max((self.noise_sd / self.prior_sd) ** 2)) + _JITTER
@@ -105,18 +139,27 @@ class Discrepancy:
         D = np.asarray(D, dtype=float).reshape(Z.shape[0], -1)
         if Z.shape[0] == 0 or not np.all(np.isfinite(D)) or not np.all(np.isfinite(Z)):
             raise ValueError("a discrepancy needs at least one run with finite inputs and values")
-        pairs = [(LENGTH_SCALE, self._min_nugget())]
+        centre = Z.mean(axis=0)
+        choices = [(_Kernel(LENGTH_SCALE, SLOPE, centre), self._min_nugget())]
         if Z.shape[0] >= SELECT_FROM:
             nuggets = sorted({self._min_nugget(), *NUGGET_GRID})
-            pairs = [(length, g) for length in LENGTH_GRID for g in nuggets]
-        fits = [self._fit(Z, D, length, g) for length, g in pairs]
+            choices = [
+                (_Kernel(length, slope, centre), g)
+                for length in LENGTH_GRID
+                for slope in SLOPE_GRID
+                for g in nuggets
+            ]
+        fits = [self._fit(Z, D, kernel, g) for kernel, g in choices]
         self._fitted = max(fits, key=lambda item: item[1])[0]
         return self
 
-    def _fit(self, Z: np.ndarray, D: np.ndarray, length: float, g: float) -> tuple[_Fitted, float]:
-        """The fit at ``(ℓ, g)`` and its restricted log-likelihood (amplitudes profiled)."""
+    def _fit(
+        self, Z: np.ndarray, D: np.ndarray, kernel: _Kernel, g: float
+    ) -> tuple[_Fitted, float]:
+        """The fit with ``kernel`` and nugget ``g``, and its restricted log-likelihood
+        (amplitudes profiled)."""
         n = Z.shape[0]
-        R = _matern52(Z, Z, length) + g * np.eye(n)
+        R = kernel(Z, Z) + g * np.eye(n)
         factor = cho_factor(R, lower=True)
         ones = cho_solve(factor, np.ones(n))
         ones_sum = float(np.sum(ones))
@@ -125,13 +168,14 @@ class Discrepancy:
         alpha = cho_solve(factor, centred)
         quad = np.sum(centred * alpha, axis=0)  # (m,)
         amplitude = np.sqrt((PRIOR_RUNS * self.prior_sd**2 + quad) / (PRIOR_RUNS + n - 1))
+        scale = np.sqrt(quad / max(n - 1, 1))
         log_det = 2.0 * float(np.sum(np.log(np.diag(factor[0]))))
         if n > 1:
             sigma2 = np.maximum(quad / (n - 1), 1e-300)
             loglik = -0.5 * float(np.sum((n - 1) * np.log(sigma2) + log_det + np.log(ones_sum)))
         else:
             loglik = 0.0
-        fitted = _Fitted(Z, length, g, factor, ones, ones_sum, mean, alpha, amplitude)
+        fitted = _Fitted(Z, kernel, g, factor, ones, ones_sum, mean, alpha, amplitude, scale)
         return fitted, loglik
 
     def predict(
@@ -146,12 +190,19 @@ class Discrepancy:
             mean = np.zeros((Z.shape[0], m))
             std = np.broadcast_to(self.prior_sd, mean.shape).copy()
             return (mean, std) if return_std else mean
-        r = _matern52(Z, fitted.Z, fitted.length)  # (n', n)
+        r = fitted.kernel(Z, fitted.Z)  # (n', n)
         mean = fitted.mean + r @ fitted.alpha
         if not return_std:
             return mean
         solved = cho_solve(fitted.factor, r.T)  # (n, n')
         explained = np.sum(r.T * solved, axis=0)
         unexplained_mean = (1.0 - r @ fitted.ones) ** 2 / fitted.ones_sum
-        share = np.maximum(1.0 + fitted.nugget - explained + unexplained_mean, 0.0)
+        prior = self._prior(Z)
+        share = np.maximum(prior + fitted.nugget - explained + unexplained_mean, 0.0)
         return mean, np.sqrt(share)[:, None] * fitted.amplitude[None, :]
+
+    def _prior(self, Z: np.ndarray) -> np.ndarray:
+        """The kernel's variance at each of ``Z`` (its diagonal, without the n'² matrix)."""
+        assert self._fitted is not None
+        kernel = self._fitted.kernel
+        return 1.0 + kernel.slope * np.sum((Z - kernel.centre) ** 2, axis=1)

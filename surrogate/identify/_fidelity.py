@@ -28,6 +28,7 @@ from ..solvers._fidelity import (
     correction_refused,
     discrepancy_inputs,
     low_fidelity_inputs,
+    too_rough,
 )
 from ..study._spec import StudySpec
 from ._verify import Verification, verification_inputs
@@ -125,11 +126,15 @@ class CorrectedModel:
         return out
 
     def refused(self) -> str | None:
-        """Why the correction is not trusted at the runs so far (the size rule), or None."""
+        """Why the correction is not trusted at the runs so far, or None: its size at any
+        run, or (once its GP chose its nugget) an F60 scatter beyond half the tolerance."""
         for record, low in self.pairs:
             reason = correction_refused(Correction.between(low, _expensive_result(record)))
             if reason is not None:
                 return reason
+        if self.f60.selected:
+            tolerance = float(np.log1p(self.spec.targets.tolerance))
+            return too_rough(float(self.f60.scatter[0]), tolerance, what="in log F60")
         return None
 
     def correction(self, record: Verification) -> Correction | None:

@@ -16,7 +16,9 @@ corrected built-in model and ask the expensive solver only to verify a point or 
   ``δ`` lives on the calibration surrogate's scale (:func:`surrogate.gp.latent_of_force`,
   logarithmic above a few hundredths of a newton);
 - the size of the correction at a point (:class:`Correction`) and when the correction is
-  not trusted (:func:`correction_refused`, :class:`MissCounter`).
+  not trusted: too large (:func:`correction_refused`), or too irregular — predictions
+  missed twice in a row (:class:`MissCounter`), or a scatter its GP calls noise beyond
+  half the tolerance (:func:`too_rough`).
 """
 
 from __future__ import annotations
@@ -37,12 +39,14 @@ __all__ = [
     "MAX_CORRECTION",
     "MISSES_IN_A_ROW",
     "MISS_SIGMAS",
+    "ROUGH_SHARE",
     "Correction",
     "MissCounter",
     "correction_refused",
     "discrepancy_inputs",
     "fidelity_record",
     "low_fidelity_inputs",
+    "too_rough",
     "uses_low_fidelity",
 ]
 
@@ -50,6 +54,7 @@ LOW_FIDELITY = "builtin"
 MAX_CORRECTION = 0.25  # a correction beyond 25 % of the curve: the built-in is no model of it
 MISS_SIGMAS = 3.0  # a prediction missed by more than this many of its standard deviations…
 MISSES_IN_A_ROW = 2  # …twice in a row (and by more than the caller's tolerance): too irregular
+ROUGH_SHARE = 0.5  # a discrepancy scattering by half the tolerance between runs: too irregular
 
 
 def uses_low_fidelity(kind: str, multi_fidelity: bool) -> bool:
@@ -136,6 +141,20 @@ def correction_refused(size: Correction) -> str | None:
             f"the expensive curve differs from the built-in one by "
             f"{100 * size.curve_rmse_relative:.0f} % of its RMS (F60 {size.f60_percent:+.1f} %), "
             f"more than the {100 * MAX_CORRECTION:.0f} % the correction is trusted for"
+        )
+    return None
+
+
+def too_rough(scatter: float, tolerance: float, *, what: str) -> str | None:
+    """The second irregularity rule: once the discrepancy's GP has chosen its length scale
+    and nugget by likelihood, the scatter it attributes to noise (``scatter``, the same
+    units as ``tolerance``) may not exceed ``ROUGH_SHARE`` of the tolerance — beyond, the
+    corrected model cannot place a point within the tolerance."""
+    if scatter > ROUGH_SHARE * tolerance:
+        return (
+            f"the discrepancy scatters by {scatter:.3g} {what} between expensive runs (its "
+            f"GP's noise), more than {ROUGH_SHARE:g} of the tolerance {tolerance:.3g}: too "
+            "irregular for its GP"
         )
     return None
 

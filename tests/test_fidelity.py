@@ -1,0 +1,284 @@
+"""Multi-fidelity: the built-in solver as the fast prior of an external full solver.
+
+The "expensive" solver here is tests/fidelity.py's: the built-in solver with a known
+smooth distortion (the size of CalculiX's coarse mesh's difference), so the correction
+has a known target and every expensive run is counted. CalculiX itself runs in
+tests/solvers/test_calculix_run.py.
+"""
+
+from __future__ import annotations
+
+import json
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import surrogate
+from surrogate.calibration._problem import coat_section
+from surrogate.calibration._synthetic import synthetic_measurements
+from surrogate.study._conditions import CONDITIONS
+from tests.fidelity import LOG_VARIABLE, distortion
+
+STUDIES = Path(__file__).resolve().parents[1] / "studies"
+
+
+def _expensive_runs(folder: Path) -> int:
+    log = folder / "expensive.log"
+    return len(log.read_text().split()) if log.exists() else 0
+
+
+def _paper_study(folder: Path, solver: str) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    text = (STUDIES / "paper_coating.toml").read_text()
+    text = text.replace('name = "paper-coating"', 'name = "mf"')
+    text = text.replace('kind = "builtin"', f'kind = "test-distorted"\n{solver}')
+    text = text.replace("surrogate_trials = 300", "surrogate_trials = 100")
+    path = folder / "mf.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.fixture
+def log_runs(tmp_path, monkeypatch):
+    monkeypatch.setenv(LOG_VARIABLE, str(tmp_path / "expensive.log"))
+    return tmp_path
+
+
+# -- the main job ---------------------------------------------------------------------------------
+TARGETS = (9.958, 48.3, 11.462)  # benchmarks/identification.py's three targets
+
+
+@pytest.mark.parametrize("target", TARGETS)
+def test_run_verifies_in_few_expensive_runs_and_reports_the_correction(
+    distorted_solver, log_runs, target
+):
+    path = _paper_study(log_runs / "mf", "")
+    result = surrogate.run(path, target=target, progress=False)
+    assert result.status == "verified", result.message
+    # every expensive run is counted, none after verification (the corrected model gives
+    # the identifiability exponents), the built-in runs apart
+    assert result.solver_calls == result.calls_to_verify == _expensive_runs(log_runs)
+    assert result.calls_to_verify <= 3
+    mf = result.multi_fidelity
+    assert mf["dropped"] is None and mf["low_fidelity_runs"] > 100
+    assert result.identifiability["exponents_from"] == "corrected model"
+    # the verified point meets the target on the expensive solver itself
+    v = result.verified
+    coat = {k: v[k] for k in ("ecoat_gpa", "scoat_gpa", "tcoat_mm")}
+    expensive = surrogate.simulate(**coat, solver="test-distorted")
+    assert abs(expensive.f60_n / target - 1) <= 0.01 and expensive.theta_sat_deg >= 80
+    # the correction reported at the answer is the known distortion there
+    builtin = surrogate.simulate(**coat)
+    settings = {"offset": -0.03, "slope": 0.01, "bend": 0.02, "rough": 0.0}
+    inputs = surrogate.solvers.solver_inputs(coat, surrogate.Rig())
+    factor = distortion(inputs, np.array([60.0]), settings)[0]
+    assert mf["correction"]["f60_percent"] == pytest.approx(100 * (factor - 1), abs=1e-6)
+    assert builtin.f60_n * factor == pytest.approx(expensive.f60_n, rel=1e-9)
+    assert "built-in runs as the prior" in result.message
+    assert "F60 " in result.message and "curve RMSE" in result.message
+
+
+def test_the_prior_saves_expensive_runs_against_the_single_fidelity_loop(
+    distorted_solver, log_runs, monkeypatch
+):
+    """Side by side on the same target and seed: the corrected model verifies in fewer
+    expensive runs than the loop that starts from a Latin hypercube on the expensive
+    solver (five runs before its first surrogate)."""
+    calls = {}
+    for name, key in (("multi", ""), ("single", "multi_fidelity = false")):
+        path = _paper_study(log_runs / name, key)
+        result = surrogate.run(path, progress=False)
+        assert result.status == "verified"
+        calls[name] = result.calls_to_verify
+        assert (result.multi_fidelity is None) == (name == "single")
+    assert calls["multi"] < calls["single"]
+    assert calls["single"] >= 6
+
+
+def test_a_correction_too_large_is_dropped_and_the_single_fidelity_loop_verifies(
+    distorted_solver, log_runs
+):
+    path = _paper_study(log_runs / "mf", "offset = 0.5   # +50 %: no longer a model of it")
+    result = surrogate.run(path, progress=False)
+    mf = result.multi_fidelity
+    assert mf["dropped"] is not None and "more than the 25 %" in mf["dropped"]
+    assert mf["dropped_after"] == 1
+    assert "the single-fidelity loop took over" in result.message
+    assert result.status == "verified"
+    assert result.identifiability["exponents_from"] == "full solver"
+    assert result.solver_calls == _expensive_runs(log_runs)
+
+
+@pytest.mark.slow
+def test_an_irregular_correction_is_dropped(distorted_solver, log_runs):
+    """A ripple in D far shorter than the correction's length scale (±8 %): on every seed
+    the corrected model either verifies within its first runs or drops the correction
+    for irregularity — it never goes on burning expensive runs on a model it cannot
+    trust (the single-fidelity loop then goes on, here within a budget of 12)."""
+    outcomes = []
+    for seed in range(4):
+        folder = log_runs / f"seed{seed}"
+        path = _paper_study(folder, "rough = 0.08")
+        path.write_text(path.read_text().replace("max_solver_calls = 30", "max_solver_calls = 12"))
+        result = surrogate.run(path, seed=seed, progress=False)
+        mf = result.multi_fidelity
+        if mf["dropped"] is None:
+            assert result.status == "verified" and result.calls_to_verify <= 4
+        else:
+            assert "too irregular for its GP" in mf["dropped"]
+            assert mf["dropped_after"] <= 5
+        outcomes.append(mf["dropped"] is not None)
+    assert any(outcomes)  # the rule fired
+
+
+def test_run_json_has_the_multi_fidelity_record(distorted_solver, log_runs, capsys):
+    from surrogate._cli import main
+
+    path = _paper_study(log_runs / "mf", "")
+    assert main(["run", str(path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out["multi_fidelity"]) == {
+        "low_fidelity",
+        "low_fidelity_runs",
+        "correction",
+        "dropped",
+        "dropped_after",
+    }
+    assert set(out["multi_fidelity"]["correction"]) == {
+        "f60_percent",
+        "theta_sat_deg",
+        "curve_rmse_n",
+        "curve_rmse_relative",
+    }
+
+
+# -- calibration and diagnosis ---------------------------------------------------------------------
+def _calibration_study(folder: Path, tests, truth, *, hidden=None, seed=0, noise=0.05) -> Path:
+    """Curves the expensive solver made at a known coating, with noise; the study (which
+    states the noise level where the tests have no replicates)."""
+    conditions = [tuple(sorted((k, v) for k, v in t.items() if k in CONDITIONS)) for t in tests]
+    replicates = len(set(conditions)) < len(conditions)
+    folder.mkdir(parents=True, exist_ok=True)
+    table = synthetic_measurements(
+        tests, coating=truth, effects=hidden, noise_n=noise, seed=seed, solver="test-distorted"
+    )
+    table.to_csv(folder / "tests.csv", index=False)
+    path = folder / "study.toml"
+    path.write_text(
+        textwrap.dedent(
+            f"""
+            [study]
+            name = "mf"
+            seed = {seed}
+            [solver]
+            kind = "test-distorted"
+            [measurements]
+            file = "tests.csv"
+            {"" if replicates else f"noise_n = {noise}"}
+            [budget]
+            surrogate_trials = 100
+            calibration_solver_calls = 30
+            """
+        )
+    )
+    return path
+
+
+def _truth_rmse(path: Path, truth) -> float:
+    """The RMSE of the truth itself on the expensive solver: the noise floor."""
+    from surrogate.calibration._problem import CalibrationProblem, load_calibration
+
+    spec, data, _, _ = load_calibration(path, None, ())
+    problem = CalibrationProblem(spec, data, ())
+    curves = [
+        surrogate.simulate(**truth, conditions=group, solver="test-distorted")
+        for group in problem.groups
+    ]
+    return problem.rmse(
+        np.array([np.interp(problem.angle_deg, c.angle_deg, c.force_n) for c in curves])
+    )
+
+
+BENDING = [
+    {"test_id": "l10", "bending_length_mm": 10.0},
+    {"test_id": "l15", "bending_length_mm": 15.0},
+]
+TRUTHS = [  # the calibration benchmark's coatings: mid, thin-soft, early-yield
+    {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02},
+    {"ecoat_gpa": 0.6, "scoat_gpa": 0.06, "tcoat_mm": 0.012},
+    {"ecoat_gpa": 3.0, "scoat_gpa": 0.07, "tcoat_mm": 0.05},
+]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", range(len(TRUTHS)))
+def test_calibration_reaches_the_expensive_solvers_noise_floor_in_few_expensive_runs(
+    distorted_solver, log_runs, case
+):
+    """Two bending lengths, noise 0.05 N, curves from the expensive solver: the noise
+    floor (RMSE ≤ 1.05 × the truth's own, D and Mp within 5 %), ``converged`` at an
+    expensive-verified point, in at most 30 expensive runs (design.md §6)."""
+    truth = TRUTHS[case]
+    path = _calibration_study(log_runs / "cal", BENDING, truth, seed=case)
+    floor = _truth_rmse(path, truth)
+    before = _expensive_runs(log_runs)
+    result = surrogate.calibrate(path, progress=False)
+    assert result.status == "converged" and result.misfit == "within the noise", result.message
+    assert result.rmse_n <= 1.05 * floor
+    (d, mp), (d0, mp0) = coat_section(result.params, 1.2), coat_section(truth, 1.2)
+    assert abs(d / d0 - 1) <= 0.05 and abs(mp / mp0 - 1) <= 0.05
+    assert result.solver_calls == _expensive_runs(log_runs) - before
+    assert result.solver_calls <= 30
+    mf = result.multi_fidelity
+    assert mf["dropped"] is None and mf["low_fidelity_runs"] > result.solver_calls
+    assert "at a point test-distorted verified" in result.message
+    # the reported size of the correction is the solvers' difference at the answer
+    coat = {k: result.params[k] for k in ("ecoat_gpa", "scoat_gpa", "tcoat_mm")}
+    ratios = [
+        surrogate.simulate(**coat, conditions=c, solver="test-distorted").f60_n
+        / surrogate.simulate(**coat, conditions=c).f60_n
+        for c in ({"bending_length_mm": 10.0}, {"bending_length_mm": 15.0})
+    ]
+    reported = mf["correction"]["f60_percent"]  # the group of the larger curve difference
+    assert any(reported == pytest.approx(100 * (r - 1), abs=1e-6) for r in ratios)
+
+
+DIAGNOSIS_TESTS = [
+    {"test_id": "a1", "tension_n": 0.0, "direction": "warp", "temperature_c": 21.0},
+    {"test_id": "a2", "tension_n": 0.0, "direction": "warp", "temperature_c": 24.5},
+    {"test_id": "b", "tension_n": 20.0, "direction": "weft", "temperature_c": 22.0},
+    {"test_id": "c", "tension_n": 40.0, "direction": "warp", "temperature_c": 23.0},
+]
+
+
+@pytest.mark.slow
+def test_diagnosis_names_a_hidden_effect_confirming_it_on_the_expensive_solver(
+    distorted_solver, log_runs
+):
+    """Hidden tension in curves the expensive solver made: the candidates are refitted on
+    the corrected built-in model, the leader is confirmed on the expensive solver (its
+    RMSE after adding it there within 1.3 × noise), membrane_bending — which the solver
+    cannot model — is skipped with its reason, and at most 60 expensive runs are spent."""
+    truth = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
+    hidden = {"tension": {"k_e": 0.006, "k_s": 0.006}}
+    path = _calibration_study(log_runs / "diag", DIAGNOSIS_TESTS, truth, hidden=hidden, seed=3)
+    data_runs = _expensive_runs(log_runs)
+    candidates = ["tension", "anisotropy", "hardening", "membrane_bending"]
+    result = surrogate.diagnose(path, candidates=candidates, progress=False)
+    assert result.systematic
+    leader = result.ranking[0]
+    assert leader["effect"] == "tension" and leader["confirmed_by"] == "test-distorted"
+    assert leader["delta_bic"] < -10 and leader["rmse_n"] <= 1.3 * result.noise_n
+    assert result.verdict.startswith("missing effect: tension")
+    mf = result.multi_fidelity
+    assert mf["confirmed"] == ["tension"]
+    assert [s["effect"] for s in mf["skipped"]] == ["membrane_bending"]
+    assert "bare-webbing" in mf["skipped"][0]["reason"]
+    assert "skipped, test-distorted cannot model them: membrane_bending" in result.verdict
+    assert "membrane_bending" not in [c["effect"] for c in result.ranking]
+    assert result.solver_calls == _expensive_runs(log_runs) - data_runs <= 60
+    assert mf["low_fidelity_runs"] > result.solver_calls
+    unconfirmed = [c for c in result.ranking if c["effect"] != "tension"]
+    assert all(c["confirmed_by"] is None for c in unconfirmed)
