@@ -97,7 +97,26 @@ BAD = {
         GOOD + '\n[measurements]\nfile = "m.csv"\nnoise_n = -1\n',
         "measurements.noise_n",
     ),
+    "multi-fidelity": (
+        GOOD.replace('kind = "builtin"', 'kind = "builtin"\nmulti_fidelity = "yes"'),
+        "[solver] multi_fidelity must be true or false, got 'yes'",
+    ),
 }
+
+
+def test_multi_fidelity_is_on_for_an_external_solver_unless_switched_off(tmp_path):
+    path = tmp_path / "s.toml"
+    calculix = GOOD.replace('kind = "builtin"', 'kind = "calculix"')
+    path.write_text(calculix)
+    assert load_study(path).low_fidelity
+    path.write_text(
+        calculix.replace('kind = "calculix"', 'kind = "calculix"\nmulti_fidelity = false')
+    )
+    assert not load_study(path).low_fidelity
+    path.write_text(GOOD)  # the built-in solver is its own low fidelity
+    assert not load_study(path).low_fidelity
+    shipped = load_study(STUDIES / "paper_coating_calculix.toml")
+    assert shipped.solver == "calculix" and shipped.low_fidelity
 
 
 @pytest.mark.parametrize("kind", sorted(BAD))

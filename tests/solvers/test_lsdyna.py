@@ -215,3 +215,25 @@ def test_doe_runs_an_external_solver_through_the_pool_and_the_cache(tmp_path):
     assert (again.n_ok, again.solver_calls, again.cached) == (4, 0, 4)
     samples = surrogate.SampleSet.read(tmp_path / "a.csv")
     assert samples.meta["solver"] == "lsdyna"
+
+
+def test_the_main_job_takes_the_multi_fidelity_path_with_lsdyna(tmp_path):
+    """``kind = "lsdyna"`` through the stand-in (not LS-DYNA: it runs the built-in solver
+    and writes rcforc/nodout): the built-in solver is its prior like CalculiX's, every
+    expensive run goes through the deck writer and the output parsers, and the correction
+    reported is the stand-in's output resolution only."""
+    import surrogate
+
+    command = [sys.executable, str(FIXTURES / "fake_lsdyna.py")]
+    (tmp_path / "s.toml").write_text(
+        '[study]\nname = "s"\n[targets]\nf60_n = 9.958\n'
+        f'[solver]\nkind = "lsdyna"\ntemplate = "{TEMPLATE}"\ncommand = {json.dumps(command)}\n'
+        "[budget]\nsurrogate_trials = 100\n"
+    )
+    result = surrogate.run(tmp_path / "s.toml", progress=False)
+    assert result.status == "verified", result.message
+    assert result.solver_calls == result.calls_to_verify <= 2
+    mf = result.multi_fidelity
+    assert mf["dropped"] is None and mf["low_fidelity_runs"] > 0
+    assert abs(mf["correction"]["f60_percent"]) < 0.1  # the same physics, printed to 7 digits
+    assert "lsdyna against the built-in solver" in result.message
