@@ -9,14 +9,18 @@ Side by side, over ``--seeds`` seeds and three targets:
   the target;
 - Optuna's TPESampler run directly on the full solver, same constraints;
 - random search on the full solver;
-- ``calculix`` (not in the default ``--methods``: minutes per run): ours with
-  CalculiX (``--calculix-mesh``, coarse by default) as the full solver,
-  ``--calculix-seeds`` seeds per target, no identifiability runs.
+- ``calculix`` and ``calculix-single`` (not in the default ``--methods``: CalculiX
+  runs take half a minute to minutes): ours with CalculiX (``--calculix-mesh``,
+  coarse by default) as the full solver, ``--calculix-seeds`` seeds per target, with the
+  built-in solver as its prior (multi-fidelity, the default of an external solver) and
+  without it (``[solver] multi_fidelity = false``: a Latin hypercube of CalculiX runs
+  first), no identifiability runs.
 Direct searches stop at ``--cap`` calls; a run that never met the target counts
 as the cap (a lower bound, marked with ≥).
 
 Run: .venv/bin/python benchmarks/identification.py [--seeds 10] [--cap 200] [--jobs 2]
-CalculiX row: .venv/bin/python benchmarks/identification.py --methods calculix,paper
+CalculiX rows: .venv/bin/python benchmarks/identification.py --methods calculix,calculix-single \
+    --calculix-seeds 3
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import time
 import warnings
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import optuna
 
@@ -36,6 +41,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != ROOT / "benchmarks"]
 
 import surrogate  # noqa: E402
+from benchmarks._machine import machine  # noqa: E402
 from surrogate.identify._loop import run  # noqa: E402
 from surrogate.identify._objective import constraint_values, meets_target, relative_misfit  # noqa: E402
 from surrogate.study._spec import Targets, load_study  # noqa: E402
@@ -73,7 +79,10 @@ def ours(target: float, seed: int) -> tuple[int, bool, float]:
     return calls, result.status == "verified", time.perf_counter() - start
 
 
-def ours_calculix(target: float, seed: int, mesh: str) -> tuple[int, bool, float]:
+def ours_calculix(
+    target: float, seed: int, mesh: str, multi_fidelity: bool
+) -> tuple[int, bool, float, int]:
+    """CalculiX runs to a verified point, met, wall time, built-in runs (the prior's)."""
     import dataclasses
 
     start = time.perf_counter()
@@ -84,11 +93,13 @@ def ours_calculix(target: float, seed: int, mesh: str) -> tuple[int, bool, float
             path=Path(folder) / "study.toml",
             solver="calculix",
             solver_settings={"mesh": mesh},
+            multi_fidelity=multi_fidelity,
             budget=dataclasses.replace(spec.budget, identifiability_runs=0),
         )
         result = run(spec, storage=f"sqlite:///{folder}/b.db", progress=False)
     calls = result.calls_to_verify if result.calls_to_verify is not None else result.solver_calls
-    return calls, result.status == "verified", time.perf_counter() - start
+    low = result.multi_fidelity["low_fidelity_runs"] if result.multi_fidelity else 0
+    return calls, result.status == "verified", time.perf_counter() - start, low
 
 
 def direct(target: float, seed: int, sampler_name: str, cap: int) -> tuple[int, bool, float]:
@@ -149,8 +160,9 @@ def paper(target: float) -> tuple[int, bool, float]:
 def _job(args):
     method, target, seed, cap = args
     warnings.filterwarnings("ignore")
-    if method.startswith("calculix:"):
-        return "calculix", target, seed, ours_calculix(target, seed, method.split(":")[1])
+    if method.startswith("calculix"):
+        name, mesh = method.split(":")
+        return name, target, seed, ours_calculix(target, seed, mesh, name == "calculix")
     if method == "ours":
         return method, target, seed, ours(target, seed)
     if method == "paper":
@@ -166,7 +178,7 @@ def main() -> None:
     parser.add_argument(
         "--methods",
         default="ours,paper,tpe,random",
-        help="comma-separated subset of ours, paper, tpe, random, calculix",
+        help="comma-separated subset of ours, paper, tpe, random, calculix, calculix-single",
     )
     parser.add_argument("--calculix-mesh", choices=("coarse", "fine"), default="coarse")
     parser.add_argument("--calculix-seeds", type=int, default=1)
@@ -185,16 +197,18 @@ def main() -> None:
     ]
     jobs += [("paper", t, 0, args.cap) for t in targets if "paper" in methods]
     jobs += [
-        (f"calculix:{args.calculix_mesh}", t, s, args.cap)
+        (f"{m}:{args.calculix_mesh}", t, s, args.cap)
         for t in targets[: args.calculix_targets]
         for s in range(args.calculix_seeds)
-        if "calculix" in methods
+        for m in ("calculix", "calculix-single")
+        if m in methods
     ]
     with ProcessPoolExecutor(args.jobs) as pool:
         results = list(pool.map(_job, jobs))
-    table: dict[str, list[tuple[int, bool, float]]] = {}
+    table: dict[str, list[tuple[Any, ...]]] = {}
     for method, _, _, outcome in results:
         table.setdefault(method, []).append(outcome)
+    print(f"machine: {machine()}")
     print(
         f"targets F60 = {', '.join(f'{t:.3f}' for t in targets)} N (tolerance 1 %), "
         f"{args.seeds} seeds each; direct searches capped at {args.cap} calls"
@@ -205,7 +219,8 @@ def main() -> None:
         ("paper", "paper (64 + 5)"),
         ("tpe", "TPE on the solver"),
         ("random", "random search"),
-        ("calculix", f"ours, CalculiX {args.calculix_mesh}"),
+        ("calculix", f"ours, CalculiX {args.calculix_mesh}, built-in prior"),
+        ("calculix-single", f"ours, CalculiX {args.calculix_mesh}, single fidelity"),
     ):
         if method not in table:
             continue
@@ -225,6 +240,17 @@ def main() -> None:
             f"  {label:<22} median calls {censored}{median:>6.1f}  met {met}/{len(rows)}  "
             f"median wall {statistics.median(r[2] for r in rows):.1f} s  "
             f"(calls: {' '.join(str(c) for c in calls)})"
+            + (
+                f", built-in runs median {statistics.median(r[3] for r in rows):.0f}"
+                if method == "calculix"
+                else ""
+            )
+        )
+    if {"calculix", "calculix-single"} <= set(medians):
+        print(
+            f"CalculiX runs to a verified optimum: {medians['calculix']:g} with the built-in "
+            f"prior against {medians['calculix-single']:g} without "
+            f"({medians['calculix-single'] / medians['calculix']:.1f}x fewer; target: <= 3)"
         )
     if not {"paper", "ours", "tpe", "random"} <= set(medians):
         return

@@ -1,0 +1,227 @@
+"""Benchmark of multi-fidelity (issue 16) with CalculiX as the full solver: calibration and
+diagnosis on curves CalculiX made, the built-in solver as its prior.
+
+- calibration (``--only calibration``): a coating's curves made by CalculiX (coarse mesh)
+  at two bending lengths (10 and 15 mm), noise 0.05 N (stated in the study);
+  ``surrogate.calibrate`` sees only the CSV. Reported: CalculiX runs and built-in runs,
+  RMSE over the truth's own RMSE on the same data (the truth's curves from CalculiX),
+  the errors of D and Mp, status and misfit, wall time. Targets (issue 16): the noise
+  floor — RMSE ≤ 1.05 × the truth's, D and Mp within 5 % — in ≤ 30 CalculiX runs.
+- diagnosis (``--only diagnosis``): CalculiX-made curves with a hidden effect —
+  ``hardening`` (a yielding coat, tests at 10 and 15 mm with replicates) and
+  ``tension`` (tests at 0, 20 and 40 N with replicates) — and a decoy ``temperature_c``
+  column; ``surrogate.diagnose`` with every built-in effect a candidate (CalculiX cannot
+  model gravity, clamp_slip and membrane_bending: skipped). Reported: the effect named,
+  whether CalculiX confirmed it, CalculiX runs, the RMSE after adding it over the noise,
+  wall time. Targets: named, ≤ 60 CalculiX runs, RMSE after ≤ 1.5 × noise, ≤ 1 h wall
+  on 2 cores.
+
+Every figure is printed with the machine; ``--work DIR`` keeps the study folders (their
+result caches let a second run reuse the CalculiX runs: a cached run still counts as a
+CalculiX run of the calibration it belongs to).
+
+Run: .venv/bin/python benchmarks/fidelity.py [--only calibration,diagnosis] [--jobs 2]
+     [--work DIR] [--out fidelity.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import textwrap
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+from typing import Any
+
+for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_variable, "1")
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != ROOT / "benchmarks"]
+
+import surrogate  # noqa: E402
+from benchmarks._machine import machine  # noqa: E402
+from surrogate.calibration._problem import coat_section  # noqa: E402
+from surrogate.calibration._synthetic import synthetic_measurements  # noqa: E402
+
+SOLVER = {"kind": "calculix", "mesh": "coarse"}
+NOISE_N = 0.05
+TWO_LENGTHS = [
+    {"test_id": "l10", "bending_length_mm": 10.0},
+    {"test_id": "l15", "bending_length_mm": 15.0},
+]
+CALIBRATIONS = {  # name: coating of the truth
+    "mid": {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02},
+    "paper": {"ecoat_gpa": 1.0, "scoat_gpa": 0.2, "tcoat_mm": 0.012},
+}
+DIAGNOSES = {  # name: (coating, hidden effect, tests)
+    "hardening": (
+        {"ecoat_gpa": 1.2, "scoat_gpa": 0.1, "tcoat_mm": 0.02},
+        {"hardening": {"ratio": 0.1}},
+        [
+            {"test_id": "a1", "bending_length_mm": 10.0, "temperature_c": 21.0},
+            {"test_id": "a2", "bending_length_mm": 10.0, "temperature_c": 24.0},
+            {"test_id": "b1", "bending_length_mm": 15.0, "temperature_c": 22.5},
+            {"test_id": "b2", "bending_length_mm": 15.0, "temperature_c": 21.5},
+        ],
+    ),
+    "tension": (
+        {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02},
+        {"tension": {"k_e": 0.006, "k_s": 0.006}},
+        [
+            {"test_id": "a1", "tension_n": 0.0, "temperature_c": 21.0},
+            {"test_id": "a2", "tension_n": 0.0, "temperature_c": 24.0},
+            {"test_id": "b", "tension_n": 20.0, "temperature_c": 22.5},
+            {"test_id": "c", "tension_n": 40.0, "temperature_c": 21.5},
+        ],
+    ),
+}
+
+
+def _study(folder: Path, tests, coating, hidden, *, seed: int, stated_noise: bool) -> Path:
+    """CalculiX-made data (cached in ``folder``) and the study that sees only its CSV."""
+    folder.mkdir(parents=True, exist_ok=True)
+    data = folder / "tests.csv"
+    if not data.exists():
+        table = synthetic_measurements(
+            tests,
+            coating=coating,
+            effects=hidden,
+            noise_n=NOISE_N,
+            seed=seed,
+            solver=SOLVER["kind"],
+            solver_settings={"mesh": SOLVER["mesh"]},
+        )
+        table.to_csv(data, index=False)
+    noise = f"noise_n = {NOISE_N}" if stated_noise else ""
+    path = folder / "study.toml"
+    path.write_text(
+        textwrap.dedent(
+            f"""
+            [study]
+            name = "bench"
+            seed = {seed}
+            [solver]
+            kind = "{SOLVER["kind"]}"
+            mesh = "{SOLVER["mesh"]}"
+            timeout_s = 1800
+            [measurements]
+            file = "tests.csv"
+            {noise}
+            [budget]
+            calibration_solver_calls = 30
+            surrogate_trials = 100
+            """
+        )
+    )
+    return path
+
+
+def calibration_case(task: tuple[str, Path]) -> dict[str, Any]:
+    name, work = task
+    truth = CALIBRATIONS[name]
+    path = _study(work / f"calibration-{name}", TWO_LENGTHS, truth, None, seed=1, stated_noise=True)
+    at_truth = surrogate.compare(path, params=truth, plots=False, progress=False).rmse_n
+    start = time.perf_counter()
+    result = surrogate.calibrate(path, progress=False)
+    seconds = time.perf_counter() - start
+    (d, mp), (d0, mp0) = coat_section(result.params, 1.2), coat_section(truth, 1.2)
+    mf = result.multi_fidelity or {}
+    return {
+        "kind": "calibration",
+        "set": name,
+        "calculix_runs": result.solver_calls,
+        "builtin_runs": mf.get("low_fidelity_runs"),
+        "rmse_over_truth": result.rmse_n / at_truth,
+        "d_error": d / d0 - 1.0,
+        "mp_error": mp / mp0 - 1.0,
+        "status": result.status,
+        "misfit": result.misfit,
+        "correction": mf.get("correction"),
+        "dropped": mf.get("dropped"),
+        "seconds": seconds,
+        "message": result.message,
+    }
+
+
+def diagnosis_case(task: tuple[str, Path]) -> dict[str, Any]:
+    name, work = task
+    coating, hidden, tests = DIAGNOSES[name]
+    path = _study(work / f"diagnosis-{name}", tests, coating, hidden, seed=2, stated_noise=False)
+    start = time.perf_counter()
+    result = surrogate.diagnose(path, jobs=1, progress=False)
+    seconds = time.perf_counter() - start
+    top = result.ranking[0] if result.ranking else None
+    mf = result.multi_fidelity or {}
+    return {
+        "kind": "diagnosis",
+        "set": name,
+        "named": result.verdict.startswith(f"missing effect: {name}") or name in result.tied_with,
+        "first": top["effect"] if top else None,
+        "confirmed": mf.get("confirmed"),
+        "skipped": [s["effect"] for s in mf.get("skipped", [])],
+        "calculix_runs": result.solver_calls,
+        "builtin_runs": mf.get("low_fidelity_runs"),
+        "before": result.rmse_n / result.noise_n,
+        "after": (top["rmse_n"] if top else result.rmse_n) / result.noise_n,
+        "seconds": seconds,
+        "verdict": result.verdict,
+    }
+
+
+def _job(task: tuple[str, str, Path]) -> dict[str, Any]:
+    kind, name, work = task
+    return (calibration_case if kind == "calibration" else diagnosis_case)((name, work))
+
+
+def _print(row: dict[str, Any]) -> None:
+    if row["kind"] == "calibration":
+        print(
+            f"calibration {row['set']:<10} CalculiX runs {row['calculix_runs']:>3}  built-in runs "
+            f"{row['builtin_runs']:>5}  RMSE/truth {row['rmse_over_truth']:.3f}  D err "
+            f"{100 * row['d_error']:+.2f} %  Mp err {100 * row['mp_error']:+.2f} %  "
+            f"{row['status']} / {row['misfit']}  {row['seconds']:.0f} s",
+            flush=True,
+        )
+        return
+    print(
+        f"diagnosis hidden {row['set']:<10} first {row['first'] or '-':<16} named "
+        f"{'yes' if row['named'] else 'no'}  confirmed {','.join(row['confirmed'] or []) or '-'}  "
+        f"CalculiX runs {row['calculix_runs']:>3}  built-in runs {row['builtin_runs']:>5}  "
+        f"RMSE/noise {row['before']:.2f} → {row['after']:.2f}  {row['seconds']:.0f} s",
+        flush=True,
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", default="calibration,diagnosis")
+    parser.add_argument("--jobs", type=int, default=2, help="cases at once")
+    parser.add_argument("--work", type=Path, help="keep the study folders (and their caches)")
+    parser.add_argument("--out", type=Path, help="write the rows as JSON")
+    args = parser.parse_args()
+    kinds = args.only.split(",")
+    work = args.work or Path(tempfile.mkdtemp(prefix="fidelity-bench-"))
+    tasks = [("calibration", n, work) for n in CALIBRATIONS if "calibration" in kinds]
+    tasks += [("diagnosis", n, work) for n in DIAGNOSES if "diagnosis" in kinds]
+    print(f"{len(tasks)} cases, {args.jobs} at once; {machine()}; work folder {work}", flush=True)
+    start = time.perf_counter()
+    rows = []
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        for future in as_completed([pool.submit(_job, task) for task in tasks]):
+            rows.append(future.result())
+            _print(rows[-1])
+    print(f"wall time {time.perf_counter() - start:.0f} s, {args.jobs} cases at once")
+    for row in rows:
+        if row["kind"] == "diagnosis":
+            print(f"  {row['set']}: {row['verdict']}")
+    if args.out:
+        args.out.write_text(json.dumps(rows, indent=1, default=str))
+
+
+if __name__ == "__main__":
+    main()
