@@ -13,10 +13,8 @@ The packages, top down (a package imports from its own row or the rows below)::
       → physics/ (the rod, the coating section, curve features)
 """
 
-from importlib import import_module
-from typing import Any
-
 from ._errors import InputDataError, SolverError, SurrogateError
+from ._lazy import lazy_attributes
 from .physics import CurveFeatures, curve_features
 from .solvers._simulate import BendingCurve, simulate
 from .study._rig import Rig
@@ -103,14 +101,4 @@ __all__ = [
 
 __version__ = "0.1.0"
 
-
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        value = getattr(import_module(_LAZY[name], __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'surrogate' has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(__all__)
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, __all__)

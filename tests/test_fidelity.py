@@ -76,7 +76,7 @@ def test_run_verifies_in_few_expensive_runs_and_reports_the_correction(
     factor = distortion(inputs, np.array([60.0]), settings)[0]
     assert mf["correction"]["f60_percent"] == pytest.approx(100 * (factor - 1), abs=1e-6)
     assert builtin.f60_n * factor == pytest.approx(expensive.f60_n, rel=1e-9)
-    assert "built-in runs as the prior" in result.message
+    assert "Multi-fidelity: the searched model was the built-in solver corrected" in result.message
     assert "F60 " in result.message and "curve RMSE" in result.message
 
 
@@ -116,12 +116,12 @@ def test_an_irregular_correction_is_dropped(distorted_solver, log_runs):
     """A ripple in D far shorter than the correction's length scale (±8 %): on every seed
     the corrected model either verifies within its first runs or drops the correction
     for irregularity — it never goes on burning expensive runs on a model it cannot
-    trust (the single-fidelity loop then goes on, here within a budget of 12)."""
+    trust (the single-fidelity loop then goes on; here its budget stops it at once)."""
     outcomes = []
     for seed in range(4):
         folder = log_runs / f"seed{seed}"
         path = _paper_study(folder, "rough = 0.08")
-        path.write_text(path.read_text().replace("max_solver_calls = 30", "max_solver_calls = 12"))
+        path.write_text(path.read_text().replace("max_solver_calls = 30", "max_solver_calls = 6"))
         result = surrogate.run(path, seed=seed, progress=False)
         mf = result.multi_fidelity
         if mf["dropped"] is None:
@@ -282,3 +282,22 @@ def test_diagnosis_names_a_hidden_effect_confirming_it_on_the_expensive_solver(
     assert mf["low_fidelity_runs"] > result.solver_calls
     unconfirmed = [c for c in result.ranking if c["effect"] != "tension"]
     assert all(c["confirmed_by"] is None for c in unconfirmed)
+
+
+def test_a_resumed_or_worker_run_repeats_no_expensive_run(distorted_solver, log_runs):
+    """The corrected model's decisions follow from the expensive runs alone, so a run
+    started again on the same storage solves nothing more, and two local worker
+    processes on a journal storage verify the same points as one process."""
+    path = _paper_study(log_runs / "mf", "")
+    first = surrogate.run(path, progress=False)
+    runs = _expensive_runs(log_runs)
+    again = surrogate.run(path, progress=False)
+    assert _expensive_runs(log_runs) == runs and again.verified == first.verified
+    assert again.solver_calls == first.solver_calls
+
+    other = _paper_study(log_runs / "workers", "")
+    journal = f"journal://{log_runs / 'workers' / 'mf.journal'}"
+    parallel = surrogate.run(other, storage=journal, jobs=2, progress=False)
+    assert parallel.verified == first.verified
+    assert parallel.solver_calls == first.solver_calls
+    assert _expensive_runs(log_runs) == runs + first.solver_calls

@@ -211,15 +211,8 @@ def _verified_refit(problem: CalibrationProblem, loop: CalibrationLoop, noise: f
     expensive residual, the corrected model's Jacobian for the held-out error."""
     fit = loop.best_fit()
     assert fit is not None  # a corrected calibration tests every point it verifies
-    return _Refit(
-        None,
-        fit.theta,
-        dict(zip(problem.space.names, map(float, fit.theta), strict=True)),
-        fit.residual,
-        fit.curves,
-        _heldout(problem, fit.residual, fit.jacobian, fit.at_bound, noise),
-        set(),
-    )
+    heldout = _heldout(problem, fit.residual, fit.jacobian, fit.at_bound, noise)
+    return _Refit(None, problem.space.names, fit.theta, fit.residual, fit.curves, heldout, set())
 
 
 def _with_fidelity(
@@ -602,12 +595,16 @@ class _Refit:
     """One model (the current one, ``effect=None``, or it plus a candidate) refitted locally."""
 
     effect: str | None
+    names: tuple[str, ...]
     theta: np.ndarray
-    params: dict[str, float]
     residual: np.ndarray
     curves: np.ndarray
     heldout_rmse: float
     used: set[str]
+
+    @property
+    def params(self) -> dict[str, float]:
+        return dict(zip(self.names, map(float, self.theta), strict=True))
 
     @property
     def rmse(self) -> float:
@@ -628,8 +625,8 @@ def _refit(task: tuple[Any, ...]) -> _Refit:
     fit = _local_fit(problem, runs, _start(problem, params), noise=noise)
     return _Refit(
         effect,
+        problem.space.names,
         fit.theta,
-        dict(zip(problem.space.names, map(float, fit.theta), strict=True)),
         fit.residual,
         fit.curves,
         fit.heldout_rmse,

@@ -294,9 +294,10 @@ class CorrectedCalibration(CalibrationLoop):
     def _at_verified(self, at: LocalFit, point: VerifiedPoint) -> LocalFit:
         """The test's fit at a verified point, with the expensive residual and curves
         (the corrected model's agree with them there up to the correction's nugget)."""
+        kind = self.problem.spec.solver
         message = (
-            f"{at.message} (the built-in model corrected towards "
-            f"{self.problem.spec.solver}, at a point {self.problem.spec.solver} verified)"
+            f"{at.message} — of the built-in model corrected towards {kind}, "
+            f"at a point {kind} verified"
         )
         return replace(
             at,

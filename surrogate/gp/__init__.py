@@ -12,8 +12,7 @@ The two curve surrogates reduce curves to one :class:`~surrogate.gp._basis.Princ
 Nothing here reads files of a study, prints, or sees an Optuna object.
 """
 
-from importlib import import_module
-from typing import Any
+from .._lazy import lazy_attributes
 
 # scikit-learn loads with the first surrogate used: the discrepancy and the curve scale
 # (numpy and SciPy only) serve the solvers without it.
@@ -41,14 +40,4 @@ __all__ = [
     "latent_slope",
 ]
 
-
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        value = getattr(import_module(_LAZY[name], __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(__all__)
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, __all__)

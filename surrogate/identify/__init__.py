@@ -16,8 +16,7 @@ The flow, one module a step:
 - :mod:`._export`: the verified optimum as an LS-DYNA card.
 """
 
-from importlib import import_module
-from typing import Any
+from .._lazy import lazy_attributes
 
 # The commands load on first use (scikit-learn, Optuna and pandas are slow to import), so
 # the CLI's parser and ``surrogate simulate`` do not pay for them.
@@ -51,14 +50,4 @@ __all__ = [
     "work",
 ]
 
-
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        value = getattr(import_module(_LAZY[name], __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(__all__)
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, __all__)

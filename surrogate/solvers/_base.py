@@ -38,6 +38,7 @@ if TYPE_CHECKING:
 __all__ = [
     "Solver",
     "available_solvers",
+    "beyond_the_coat",
     "check_common_settings",
     "command_list",
     "curve_result",
@@ -269,6 +270,19 @@ def _die_with_parent() -> tuple[str, ...]:
     except (OSError, subprocess.TimeoutExpired):
         works = False
     return prefix if works else ()
+
+
+def beyond_the_coat(state: ModelState) -> str | None:
+    """The effect whose physics ``state`` carries beyond the coat and the rig (a bare-webbing
+    stiffness, self-weight, a compliant clamp), or None: what an adapter that passes only
+    the coat to its solver cannot model."""
+    if state.extra_stiffness_nmm:
+        return "membrane_bending"
+    if state.line_load_n_mm:
+        return "gravity"
+    if state.clamp_stiffness_nmm is not None:
+        return "clamp_slip"
+    return None
 
 
 def guarded(solve: Callable[[], dict[str, Any]]) -> dict[str, Any]:

@@ -40,6 +40,7 @@ from .._errors import InputDataError, SolverError
 from ..effects import ModelState
 from ._base import (
     Solver,
+    beyond_the_coat,
     check_common_settings,
     command_list,
     curve_result,
@@ -382,13 +383,13 @@ def calculix_deck(state: ModelState, *, mesh: str | CalculixMesh = "coarse") -> 
 def refusal(state: ModelState) -> str | None:
     """Why the deck cannot model ``state`` (None when it can): it has no bare-webbing
     stiffness, self-weight or compliant clamp."""
-    if state.extra_stiffness_nmm:
+    effect = beyond_the_coat(state)
+    if effect == "membrane_bending":
         return (
             "the calculix solver has no bare-webbing bending stiffness (membrane_bending); "
             "use the builtin solver for that effect"
         )
-    if state.line_load_n_mm or state.clamp_stiffness_nmm is not None:
-        effect = "gravity" if state.line_load_n_mm else "clamp_slip"
+    if effect is not None:
         return (
             f"the calculix deck models neither self-weight nor a compliant clamp ({effect}); "
             "use the builtin solver for that effect"

@@ -207,8 +207,8 @@ def fidelity_record(
         )
     else:
         sentence = (
-            f" (and {low_fidelity_runs} built-in runs as the prior: the searched model is the "
-            f"built-in solver corrected towards {kind})"
+            f". Multi-fidelity: the searched model was the built-in solver corrected towards "
+            f"{kind} ({low_fidelity_runs} built-in runs)"
         )
         if correction is not None:
             sentence += f"; at the answer {correction.describe(kind)}"

@@ -37,6 +37,7 @@ from .._errors import InputDataError, SolverError
 from ..effects import ModelState
 from ._base import (
     Solver,
+    beyond_the_coat,
     check_common_settings,
     command_list,
     curve_result,
@@ -340,9 +341,23 @@ class LsDynaSolver(Solver):
     def solve(self, inputs: Mapping[str, Any]) -> dict[str, Any]:
         return guarded(lambda: self._solve(inputs))
 
+    def refuses(self, state: ModelState) -> str | None:
+        """The deck gets the coat (and its hardening) only: an effect beyond it would be
+        left out silently, so it is refused."""
+        effect = beyond_the_coat(state)
+        if effect is None:
+            return None
+        return (
+            f"the lsdyna adapter passes only the coat to your deck, not {effect}; model it "
+            "in the template and leave it out of the model's effects"
+        )
+
     def _solve(self, inputs: Mapping[str, Any]) -> dict[str, Any]:
         settings = self.check_settings(inputs.get("solver_settings") or {})
         state = model_state(inputs)
+        refused = self.refuses(state)
+        if refused is not None:
+            return failed_result(refused)
         deck = self.deck(state, settings)
         with work_directory(settings, prefix="lsdyna-") as workdir:
             (workdir / DECK).write_text(deck, encoding="utf-8")

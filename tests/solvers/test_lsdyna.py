@@ -237,3 +237,24 @@ def test_the_main_job_takes_the_multi_fidelity_path_with_lsdyna(tmp_path):
     assert mf["dropped"] is None and mf["low_fidelity_runs"] > 0
     assert abs(mf["correction"]["f60_percent"]) < 0.1  # the same physics, printed to 7 digits
     assert "lsdyna against the built-in solver" in result.message
+
+
+def test_an_effect_the_deck_cannot_carry_is_refused_not_dropped(tmp_path):
+    """The adapter fills in the coat only: a model with self-weight (or a bare-webbing
+    stiffness, or a compliant clamp) is refused before LS-DYNA starts, never run without
+    it; a diagnosis skips such a candidate with this reason."""
+    from surrogate.solvers import get_solver, model_state_of
+
+    state = model_state_of(1.0, 0.2, 0.012, Rig(), {"gravity": {"areal_mass_g_m2": 1200.0}}, None)
+    reason = get_solver("lsdyna").refuses(state)
+    assert reason is not None and "not gravity" in reason
+    settings = {"template": str(TEMPLATE), "command": "does-not-matter"}
+    inputs = solver_inputs(
+        POINT,
+        Rig(),
+        solver="lsdyna",
+        effects={"gravity": {"areal_mass_g_m2": 1200.0}},
+        solver_settings=get_solver("lsdyna").check_settings(settings),
+    )
+    result = get_solver("lsdyna").solve(inputs)
+    assert result["status"] == "failed" and "not gravity" in result["reason"]
