@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from ..gp import Discrepancy, force_of_latent, latent_of_force, latent_slope
+from ..gp._discrepancy import SELECT_FROM
 from ..solvers._fidelity import (
     Correction,
     MissCounter,
@@ -37,8 +38,20 @@ from ..solvers._fidelity import (
     low_fidelity_inputs,
     too_rough,
 )
-from ._local import LocalFit, ResidualModel, SolverFailed, local_fit, optimum_test
-from ._loop import CalibrationLoop, SolverRuns, VerifiedPoint
+from ._local import (
+    LocalFit,
+    ResidualModel,
+    SolverFailed,
+    local_fit,
+    optimum_test,
+)
+from ._loop import (
+    CalibrationLoop,
+    SolverRuns,
+    VerifiedPoint,
+    along_least_determined,
+    determination_at,
+)
 from ._problem import CalibrationProblem
 
 __all__ = ["CorrectedCalibration", "CorrectedRuns", "CurveCorrection"]
@@ -46,6 +59,7 @@ __all__ = ["CorrectedCalibration", "CorrectedRuns", "CurveCorrection"]
 CURVE_PRIOR_SD = 0.05  # asinh scale ≈ log F: before any expensive run, ~5 % apart
 CURVE_NOISE_SD = 1e-3  # the expensive curve's own scatter (mesh, increments): ~0.1 %
 LOW_FIDELITY_BUDGET = 1000  # built-in runs of the first, built-in-only calibration
+PROBE_STEP = 0.25  # the probes: a quarter of a range either way, least determined direction
 
 
 class CurveCorrection:
@@ -147,6 +161,7 @@ class CorrectedCalibration(CalibrationLoop):
         self.dropped: str | None = None
         self.dropped_after = 0
         self.corrections: dict[str, Correction] = {}  # by the verified point's first key
+        self.fallen_back: str | None = None  # why the expensive local phase finished
 
     # -- the runs -------------------------------------------------------------------------------
     def corrected_runs(self, correction: CurveCorrection | None) -> CorrectedRuns:
@@ -163,15 +178,31 @@ class CorrectedCalibration(CalibrationLoop):
 
     # -- the loop ------------------------------------------------------------------------------
     def run(self, surrogate_trials: int) -> None:
-        theta = self._corrected_optimum(surrogate_trials)
+        start = self._corrected_optimum(surrogate_trials)
+        if start is None:
+            return
+        theta, probes = start
         G = len(self.problem.groups)
-        while theta is not None and self.runs.calls + G <= self.budget:
-            theta = self._step(theta)
+        for point in [theta, *probes]:
+            if self.runs.calls + G > self.budget or not self._teach(point):
+                break
+        else:
+            while self.runs.calls + G <= self.budget:
+                theta = self._next()
+                if theta is None or not self._teach(theta):
+                    break
         if self.dropped is not None:
             self._fall_back()
+            return
+        self._tested_best()
+        if not self._converged_at_best():
+            self._fall_back("the corrected model's loop ended short of a verified local optimum")
 
-    def _corrected_optimum(self, surrogate_trials: int) -> np.ndarray | None:
-        """The corrected model calibrated as a built-in study (built-in runs only)."""
+    def _corrected_optimum(
+        self, surrogate_trials: int
+    ) -> tuple[np.ndarray, list[np.ndarray]] | None:
+        """The corrected model calibrated as a built-in study (built-in runs only): its
+        optimum, and the probes along what the built-in model leaves undetermined."""
         low = self.corrected_runs(self.correction)
         loop = CalibrationLoop(
             self.problem,
@@ -184,41 +215,101 @@ class CorrectedCalibration(CalibrationLoop):
         loop.run(surrogate_trials)
         self._counted(low)
         self.iterations += loop.iterations
-        start = loop.best_fit() or loop.best()
-        return None if start is None else np.asarray(start.theta, dtype=float)
+        fit, best = loop.best_fit(), loop.best()
+        if best is None:
+            return None
+        if fit is None or fit.rmse > best.rmse:
+            return np.asarray(best.theta, dtype=float), []
+        return np.asarray(fit.theta, dtype=float), self._probes(fit)
 
-    def _step(self, theta: np.ndarray) -> np.ndarray | None:
-        """Verify ``theta`` with the expensive solver, learn from it, test it; the next
-        point to verify, or None when done (converged, failed or dropped)."""
+    def _probes(self, fit: LocalFit) -> list[np.ndarray]:
+        """Where the expensive solver first teaches the correction, besides the built-in
+        optimum: both ends of a ``PROBE_STEP`` of each range along the direction the
+        built-in model's curves determine least — where it leaves a parameter free.
+
+        Along that direction the built-in curves hardly change (a thin coat's Tcoat at
+        fixed D and Mp), so the search cannot tell its points apart until ``δ`` has seen
+        how the expensive solver does there (CalculiX's coarse mesh: a 20 % thicker coat
+        at the same D and Mp moved the RMSE from 0.044 to 0.19 N, the built-in curves
+        by 0.013 N); a correction learned at one point would be flat along it.
+        """
+        determination = determination_at(self.problem, fit)
+        if not determination.free:
+            return []
+        probes = along_least_determined(self.problem, fit, determination, PROBE_STEP)
+        self._say(
+            f"the built-in curves leave {', '.join(determination.free)} free: the expensive "
+            f"solver first runs at {len(probes)} point(s) along that direction too"
+        )
+        return probes
+
+    def _teach(self, theta: np.ndarray) -> bool:
+        """Verify ``theta`` with the expensive solver and teach the correction its runs;
+        False when that ends the corrected loop (a failure, or the correction dropped)."""
         predicted = self._predicted(theta)
         point = self._verify(theta, predicted[2])
         if point is None:
-            self._say("the expensive solver failed at the corrected model's optimum")
-            return None
+            self._say("the expensive solver failed at a point of the corrected model")
+            return False
         self.verified[-1] = point = replace(point, phase="verified")
         low = self._learn(point)
         if self._distrusted(point, low, predicted):
-            return None
+            return False
+        self._say(
+            f"verified: RMSE {point.rmse:.4g} N (predicted {predicted[2]:.4g}), "
+            f"{self.runs.calls} expensive runs"
+        )
+        return True
+
+    def _next(self) -> np.ndarray | None:
+        """The first-order test of the corrected model at the best verified point; where it
+        fails, the corrected model's local optimum from there — None when the test holds,
+        when the built-in solver fails, or when the optimum is a point already verified
+        (nothing left for the corrected model to teach)."""
+        best = self.best()
+        assert best is not None
         model = ResidualModel(self.problem, self.corrected_runs(self.correction))
         try:
-            at = optimum_test(model, theta)
+            if self._test(model, best).converged:
+                return None
+            fit = local_fit(model, best.theta)
         except SolverFailed as failed:
             self._say(f"the built-in solver failed at the verified point: {failed}")
             return None
-        self.fits.append(self._at_verified(at, point))
-        self._say(
-            f"verified: RMSE {point.rmse:.4g} N (predicted {predicted[2]:.4g}), "
-            f"{self.runs.calls} expensive runs; {at.message}"
-        )
-        if at.converged:
+        finally:
             self._counted(model.runs)
-            return None
-        fit = local_fit(model, theta)
-        self._counted(model.runs)
         self.iterations += 1
-        if np.array_equal(fit.theta, theta):
-            return None  # the corrected model finds nothing better to verify
+        G = len(self.problem.groups)
+        keys = set(self.runs.keys(np.repeat(fit.theta[None, :], G, axis=0), range(G)))
+        if any(keys == set(point.keys) for point in self.verified):
+            return None
         return np.asarray(fit.theta, dtype=float)
+
+    def _test(self, model: ResidualModel, point: VerifiedPoint) -> LocalFit:
+        """The corrected model's first-order test at a verified point; ``fits`` keeps the
+        latest test of each point (raises :class:`SolverFailed`)."""
+        at = self._at_verified(optimum_test(model, point.theta), point)
+        self.fits = [f for f in self.fits if not np.array_equal(f.theta, point.theta)] + [at]
+        self._say(f"at the best verified point (RMSE {point.rmse:.4g} N): {at.message}")
+        return at
+
+    def _tested_best(self) -> None:
+        """Make sure the best verified point has its test (the loop may end on a point
+        just taught): built-in runs only."""
+        best = self.best()
+        if best is None or any(np.array_equal(f.theta, best.theta) for f in self.fits):
+            return
+        model = ResidualModel(self.problem, self.corrected_runs(self.correction))
+        try:
+            self._test(model, best)
+        except SolverFailed as failed:
+            self._say(f"the built-in solver failed at the verified point: {failed}")
+        finally:
+            self._counted(model.runs)
+
+    def _converged_at_best(self) -> bool:
+        fit, best = self.best_fit(), self.best()
+        return fit is not None and best is not None and fit.converged and fit.rmse <= best.rmse
 
     def _predicted(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """The corrected model's curves (G, A) and their standard deviations at ``theta``
@@ -278,7 +369,9 @@ class CorrectedCalibration(CalibrationLoop):
             sd = float(np.sqrt(np.mean(stds**2)))
             if self.misses.judge(error, sd, self.noise):
                 return self._drop(self.misses.reason)
-        if self.correction.gp.selected:
+        # the scatter's rule once as many points as the GP chooses its nugget from are
+        # learned: the condition groups of one point are no replicates of that scatter
+        if self.correction.n_runs >= SELECT_FROM * len(self.problem.groups):
             slope = latent_slope(latent_of_force(point.curves[:, 1:]))
             scatter = float(np.sqrt(np.mean((slope * self.correction.gp.scatter) ** 2)))
             reason = too_rough(scatter, self.noise, what="N")
@@ -307,13 +400,14 @@ class CorrectedCalibration(CalibrationLoop):
             message=message,
         )
 
-    def _fall_back(self) -> None:
+    def _fall_back(self, why: str | None = None) -> None:
         """The expensive solver's own local phase from the best verified point."""
         start = self.best()
         G = len(self.problem.groups)
         if start is None or self.runs.calls + G > self.budget:
             return
-        self._say("the expensive solver's own local phase takes over")
+        self.fallen_back = why
+        self._say(f"{why + ': ' if why else ''}the expensive solver's own local phase takes over")
         self._local(ResidualModel(self.problem, self.runs, budget=self.budget), start)
 
     def correction_at(self, point: VerifiedPoint | None) -> Correction | None:

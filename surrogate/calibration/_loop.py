@@ -58,6 +58,7 @@ __all__ = [
     "SolverRun",
     "SolverRuns",
     "VerifiedPoint",
+    "along_least_determined",
     "determination_at",
 ]
 
@@ -216,6 +217,20 @@ def determination_at(problem: CalibrationProblem, fit: LocalFit) -> Any:
     )
 
 
+def along_least_determined(
+    problem: CalibrationProblem, fit: LocalFit, determination: Any, step: float
+) -> list[np.ndarray]:
+    """Points ``step`` of a range either way from a fit along the direction its curves
+    determine least (the last of ``determination.directions``), within the bounds and
+    outside the first-order test's box."""
+    weights = determination.directions[-1]["weights"]  # in the declared scale z
+    move = np.array([weights.get(p.name, 0.0) / p.span for p in problem.space])
+    move *= step / np.max(np.abs(move))
+    units = [np.clip(fit.unit + sign * move, 0.0, 1.0) for sign in (1.0, -1.0)]
+    units = [u for u in units if np.max(np.abs(u - fit.unit)) > FIRST_ORDER_BOX]
+    return [problem.space.clip(problem.space.from_unit(u[None, :])[0]) for u in units]
+
+
 # -- the loop ----------------------------------------------------------------------------------
 class CalibrationLoop:
     """The global phase on the surrogate, then the local phase with the full solver.
@@ -308,16 +323,14 @@ class CalibrationLoop:
         p_value = self.p_value(fit)
         if p_value >= VALLEY_P or fit.rmse > VALLEY_RMSE * self.noise:
             return []
-        direction = determination_at(self.problem, fit).directions[-1]["weights"]  # in z
-        move = np.array([direction.get(p.name, 0.0) / p.span for p in self.problem.space])
-        move *= VALLEY_STEP / np.max(np.abs(move))
-        starts = [np.clip(fit.unit + sign * move, 0.0, 1.0) for sign in (1.0, -1.0)]
-        starts = [u for u in starts if np.max(np.abs(u - fit.unit)) > FIRST_ORDER_BOX]
+        starts = along_least_determined(
+            self.problem, fit, determination_at(self.problem, fit), VALLEY_STEP
+        )
         self._say(
             f"misfit near the noise but not within it (p = {p_value:.2g}): trying "
             f"{len(starts)} start(s) along the least determined direction"
         )
-        return [self.problem.space.from_unit(u[None, :])[0] for u in starts]
+        return starts
 
     def _global(self, model: CurveSurrogate, surrogate_trials: int) -> None:
         """The initial design, then surrogate search and verification until it settles."""
