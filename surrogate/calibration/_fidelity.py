@@ -29,14 +29,12 @@ from typing import Any
 import numpy as np
 
 from ..gp import Discrepancy, force_of_latent, latent_of_force, latent_slope
-from ..gp._discrepancy import SELECT_FROM
 from ..solvers._fidelity import (
     Correction,
     MissCounter,
     correction_refused,
     discrepancy_inputs,
     low_fidelity_inputs,
-    too_rough,
 )
 from ._local import (
     LocalFit,
@@ -183,14 +181,15 @@ class CorrectedCalibration(CalibrationLoop):
             return
         theta, probes = start
         G = len(self.problem.groups)
-        for point in [theta, *probes]:
-            if self.runs.calls + G > self.budget or not self._teach(point):
+        taught = self._teach(theta)
+        for probe in probes if taught else []:
+            if self.runs.calls + G > self.budget or self.dropped is not None:
                 break
-        else:
-            while self.runs.calls + G <= self.budget:
-                theta = self._next()
-                if theta is None or not self._teach(theta):
-                    break
+            self._teach(probe)  # a probe the expensive solver cannot run is left out
+        while taught and self.dropped is None and self.runs.calls + G <= self.budget:
+            theta = self._next()
+            if theta is None or not self._teach(theta):
+                break
         if self.dropped is not None:
             self._fall_back()
             return
@@ -369,14 +368,6 @@ class CorrectedCalibration(CalibrationLoop):
             sd = float(np.sqrt(np.mean(stds**2)))
             if self.misses.judge(error, sd, self.noise):
                 return self._drop(self.misses.reason)
-        # the scatter's rule once as many points as the GP chooses its nugget from are
-        # learned: the condition groups of one point are no replicates of that scatter
-        if self.correction.n_runs >= SELECT_FROM * len(self.problem.groups):
-            slope = latent_slope(latent_of_force(point.curves[:, 1:]))
-            scatter = float(np.sqrt(np.mean((slope * self.correction.gp.scatter) ** 2)))
-            reason = too_rough(scatter, self.noise, what="N")
-            if reason is not None:
-                return self._drop(reason)
         return False
 
     def _drop(self, reason: str) -> bool:

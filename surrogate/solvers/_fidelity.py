@@ -17,8 +17,10 @@ corrected built-in model and ask the expensive solver only to verify a point or 
   logarithmic above a few hundredths of a newton);
 - the size of the correction at a point (:class:`Correction`) and when the correction is
   not trusted: too large (:func:`correction_refused`), or too irregular — predictions
-  missed twice in a row (:class:`MissCounter`), or a scatter its GP calls noise beyond
-  half the tolerance (:func:`too_rough`).
+  missed twice in a row (:class:`MissCounter`), or, for the main job's scalar
+  outputs, a scatter its GP calls noise beyond half the tolerance (:func:`too_rough`;
+  not for whole curves: from a few points the nugget shared by ~90 correlated angles
+  called CalculiX's discrepancy noise at the point that reached the noise floor).
 """
 
 from __future__ import annotations
