@@ -219,12 +219,15 @@ class CorrectedCalibration(CalibrationLoop):
             return None
         if fit is None or fit.rmse > best.rmse:
             return np.asarray(best.theta, dtype=float), []
-        return np.asarray(fit.theta, dtype=float), self._probes(fit)
+        probes = self._probes(fit) if not self.correction.n_runs else []
+        return np.asarray(fit.theta, dtype=float), probes
 
     def _probes(self, fit: LocalFit) -> list[np.ndarray]:
         """Where the expensive solver first teaches the correction, besides the built-in
         optimum: both ends of a ``PROBE_STEP`` of each range along the direction the
-        built-in model's curves determine least — where it leaves a parameter free.
+        built-in model's curves determine least — where it leaves a parameter free. Only
+        for a correction that has learned nothing yet (a diagnosis's later calibrations
+        share the current model's).
 
         Along that direction the built-in curves hardly change (a thin coat's Tcoat at
         fixed D and Mp), so the search cannot tell its points apart until ``δ`` has seen
