@@ -277,7 +277,9 @@ class CalibrationLoop:
         return min(self.verified, key=lambda v: v.rmse) if self.verified else None
 
     def best_fit(self) -> LocalFit | None:
-        return min(self.fits, key=lambda f: f.rmse) if self.fits else None
+        """The fit of lowest RMSE; of two at one point, the one whose test held (a
+        multi-fidelity loop's corrected-model test and the expensive local phase's)."""
+        return min(self.fits, key=lambda f: (f.rmse, not f.converged)) if self.fits else None
 
     def run(self, surrogate_trials: int) -> None:
         model = CurveSurrogate(self.problem.features, len(self.problem.groups), seed=self.seed)
