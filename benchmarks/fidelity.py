@@ -174,11 +174,24 @@ def diagnosis_case(task: tuple[str, Path]) -> dict[str, Any]:
 
 
 def _job(task: tuple[str, str, Path]) -> dict[str, Any]:
+    """One case; a case that fails is a row with its error (the others go on)."""
     kind, name, work = task
-    return (calibration_case if kind == "calibration" else diagnosis_case)((name, work))
+    start = time.perf_counter()
+    try:
+        return (calibration_case if kind == "calibration" else diagnosis_case)((name, work))
+    except surrogate.InputDataError as error:
+        return {
+            "kind": kind,
+            "set": name,
+            "error": str(error),
+            "seconds": time.perf_counter() - start,
+        }
 
 
 def _print(row: dict[str, Any]) -> None:
+    if "error" in row:
+        print(f"{row['kind']} {row['set']:<10} failed after {row['seconds']:.0f} s: {row['error']}")
+        return
     if row["kind"] == "calibration":
         print(
             f"calibration {row['set']:<10} CalculiX runs {row['calculix_runs']:>3}  built-in runs "
@@ -217,7 +230,7 @@ def main() -> None:
             _print(rows[-1])
     print(f"wall time {time.perf_counter() - start:.0f} s, {args.jobs} cases at once")
     for row in rows:
-        if row["kind"] == "diagnosis":
+        if row["kind"] == "diagnosis" and "error" not in row:
             print(f"  {row['set']}: {row['verdict']}")
     if args.out:
         args.out.write_text(json.dumps(rows, indent=1, default=str))

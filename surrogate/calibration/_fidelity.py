@@ -181,12 +181,11 @@ class CorrectedCalibration(CalibrationLoop):
             return
         theta, probes = start
         G = len(self.problem.groups)
-        taught = self._teach(theta)
-        for probe in probes if taught else []:
+        for point in (theta, *probes):  # a point the expensive solver cannot run is left out
             if self.runs.calls + G > self.budget or self.dropped is not None:
                 break
-            self._teach(probe)  # a probe the expensive solver cannot run is left out
-        while taught and self.dropped is None and self.runs.calls + G <= self.budget:
+            self._teach(point)
+        while self.verified and self.dropped is None and self.runs.calls + G <= self.budget:
             theta = self._next()
             if theta is None or not self._teach(theta):
                 break
