@@ -37,9 +37,13 @@ from ..solvers._fidelity import (
     low_fidelity_inputs,
 )
 from ._local import (
+    BACKTRACK,
+    FIRST_ORDER_BOX,
+    ROUGH_CHI2,
     LocalFit,
     ResidualModel,
     SolverFailed,
+    gain_tolerance,
     local_fit,
     optimum_test,
 )
@@ -58,6 +62,11 @@ CURVE_PRIOR_SD = 0.05  # asinh scale ≈ log F: before any expensive run, ~5 % a
 CURVE_NOISE_SD = 1e-3  # the expensive curve's own scatter (mesh, increments): ~0.1 %
 LOW_FIDELITY_BUDGET = 1000  # built-in runs of the first, built-in-only calibration
 PROBE_STEP = 0.25  # the probes: a quarter of a range either way, least determined direction
+# (half that where the expensive solver cannot run the first)
+# the trust region of the corrected model's proposals (Alexandrov, Dennis, Lewis & Torczon
+# 1998: a model managed by the ratio of the verified to the predicted decrease)
+SHRINK_BELOW, EXPAND_ABOVE = 0.25, 0.75  # ratios: a quarter of the step / twice the radius
+MIN_RADIUS = FIRST_ORDER_BOX / BACKTRACK[-1]  # the smallest step the first-order test tries
 
 
 class CurveCorrection:
@@ -160,6 +169,8 @@ class CorrectedCalibration(CalibrationLoop):
         self.dropped_after = 0
         self.corrections: dict[str, Correction] = {}  # by the verified point's first key
         self.fallen_back: str | None = None  # why the expensive local phase finished
+        self.radius = 1.0  # the trust region of the proposals, in fit coordinates
+        self._proposal: tuple[float, float, float] | None = None  # best, predicted RMSE, step
 
     # -- the runs -------------------------------------------------------------------------------
     def corrected_runs(self, correction: CurveCorrection | None) -> CorrectedRuns:
@@ -181,14 +192,18 @@ class CorrectedCalibration(CalibrationLoop):
             return
         theta, probes = start
         G = len(self.problem.groups)
-        for point in (theta, *probes):  # a point the expensive solver cannot run is left out
-            if self.runs.calls + G > self.budget or self.dropped is not None:
-                break
-            self._teach(point)
+        self._teach(theta)  # a point the expensive solver cannot run is left out
+        for tries in probes:  # the nearer probe only where the expensive solver failed
+            for point in tries:
+                if self.runs.calls + G > self.budget or self.dropped is not None:
+                    break
+                if self._teach(point):
+                    break
         while self.verified and self.dropped is None and self.runs.calls + G <= self.budget:
             theta = self._next()
-            if theta is None or not self._teach(theta):
+            if theta is None:
                 break
+            self._manage_radius(self._teach(theta))  # a failed run: a smaller region
         if self.dropped is not None:
             self._fall_back()
             return
@@ -198,7 +213,7 @@ class CorrectedCalibration(CalibrationLoop):
 
     def _corrected_optimum(
         self, surrogate_trials: int
-    ) -> tuple[np.ndarray, list[np.ndarray]] | None:
+    ) -> tuple[np.ndarray, list[list[np.ndarray]]] | None:
         """The corrected model calibrated as a built-in study (built-in runs only): its
         optimum, and the probes along what the built-in model leaves undetermined."""
         low = self.corrected_runs(self.correction)
@@ -221,12 +236,14 @@ class CorrectedCalibration(CalibrationLoop):
         probes = self._probes(fit) if not self.correction.n_runs else []
         return np.asarray(fit.theta, dtype=float), probes
 
-    def _probes(self, fit: LocalFit) -> list[np.ndarray]:
+    def _probes(self, fit: LocalFit) -> list[list[np.ndarray]]:
         """Where the expensive solver first teaches the correction, besides the built-in
         optimum: both ends of a ``PROBE_STEP`` of each range along the direction the
-        built-in model's curves determine least — where it leaves a parameter free. Only
-        for a correction that has learned nothing yet (a diagnosis's later calibrations
-        share the current model's).
+        built-in model's curves determine least — where it leaves a parameter free —
+        each with the point half as far, for where the expensive solver cannot run the
+        first (ccx at 85° at a CalculiX mid coating's probes). Only for a correction that
+        has learned nothing yet (a diagnosis's later calibrations share the current
+        model's).
 
         Along that direction the built-in curves hardly change (a thin coat's Tcoat at
         fixed D and Mp), so the search cannot tell its points apart until ``δ`` has seen
@@ -237,7 +254,17 @@ class CorrectedCalibration(CalibrationLoop):
         determination = determination_at(self.problem, fit)
         if not determination.free:
             return []
-        probes = along_least_determined(self.problem, fit, determination, PROBE_STEP)
+        probes = [
+            [
+                point
+                for step in (PROBE_STEP, PROBE_STEP / 2)
+                for point in along_least_determined(
+                    self.problem, fit, determination, step, signs=(sign,)
+                )
+            ]
+            for sign in (1.0, -1.0)
+        ]
+        probes = [tries for tries in probes if tries]
         self._say(
             f"the built-in curves leave {', '.join(determination.free)} free: the expensive "
             f"solver first runs at {len(probes)} point(s) along that direction too"
@@ -246,7 +273,7 @@ class CorrectedCalibration(CalibrationLoop):
 
     def _teach(self, theta: np.ndarray) -> bool:
         """Verify ``theta`` with the expensive solver and teach the correction its runs;
-        False when that ends the corrected loop (a failure, or the correction dropped)."""
+        False where the expensive solver failed or the correction was dropped."""
         predicted = self._predicted(theta)
         point = self._verify(theta, predicted[2])
         if point is None:
@@ -264,16 +291,20 @@ class CorrectedCalibration(CalibrationLoop):
 
     def _next(self) -> np.ndarray | None:
         """The first-order test of the corrected model at the best verified point; where it
-        fails, the corrected model's local optimum from there — None when the test holds,
-        when the built-in solver fails, or when the optimum is a point already verified
-        (nothing left for the corrected model to teach)."""
+        fails, the corrected model's best point within the trust region around it — None
+        when the test holds, when the region has shrunk below ``MIN_RADIUS`` (converged to
+        the expensive solver's resolution where the promise is small, see
+        :meth:`_resolved`), when the built-in solver fails, or when the proposal is a point
+        already verified (nothing left for the corrected model to teach)."""
         best = self.best()
         assert best is not None
         model = ResidualModel(self.problem, self.corrected_runs(self.correction))
         try:
-            if self._test(model, best).converged:
+            test = self._test(model, best)
+            if test.converged or self._resolved(test):
                 return None
-            fit = local_fit(model, best.theta)
+            fit = local_fit(model, best.theta, radius=self.radius)
+            at_best = float(np.sqrt(np.mean(model.residual(model.pin(best.theta)) ** 2)))
         except SolverFailed as failed:
             self._say(f"the built-in solver failed at the verified point: {failed}")
             return None
@@ -284,7 +315,54 @@ class CorrectedCalibration(CalibrationLoop):
         keys = set(self.runs.keys(np.repeat(fit.theta[None, :], G, axis=0), range(G)))
         if any(keys == set(point.keys) for point in self.verified):
             return None
+        step = float(np.max(np.abs(model.pin(fit.theta) - model.pin(best.theta))))
+        self._proposal = (best.rmse, best.rmse - (at_best - fit.rmse), step)
         return np.asarray(fit.theta, dtype=float)
+
+    def _manage_radius(self, taught: bool) -> None:
+        """The trust region after a proposal was verified: ``ρ`` = the verified decrease of
+        the RMSE over the decrease the corrected model predicted (−∞ where the
+        expensive solver failed there). ``ρ < SHRINK_BELOW``: a quarter of the step;
+        ``ρ > EXPAND_ABOVE`` with a step at the region's edge: twice the radius (at most
+        the whole range)."""
+        if self._proposal is None or self.dropped is not None:
+            return
+        before, predicted, step = self._proposal
+        self._proposal = None
+        ratio = -np.inf
+        if taught:
+            verified = self.verified[-1].rmse
+            ratio = (before - verified) / max(before - predicted, 1e-12 * before)
+        if ratio < SHRINK_BELOW:
+            self.radius = SHRINK_BELOW * step
+        elif ratio > EXPAND_ABOVE and step >= 0.9 * self.radius:
+            self.radius = min(1.0, 2.0 * self.radius)
+        self._say(f"verified over predicted decrease {ratio:.2g}: trust region ±{self.radius:.3g}")
+
+    def _resolved(self, test: LocalFit) -> bool:
+        """Whether the trust region has shrunk below ``MIN_RADIUS`` (True: stop proposing);
+        then the best verified point is a local optimum to the expensive solver's
+        resolution where the corrected model's promise there is under ``ROUGH_CHI2``
+        units of χ² — the rule of the local phase's first-order test, whose full-solver
+        steps are here the expensive solver's verifications of the shrinking proposals."""
+        if self.radius >= MIN_RADIUS:
+            return False
+        n, p = self.problem.n_points, len(self.problem.space.names)
+        promise = test.predicted_gain
+        if promise is None or promise > gain_tolerance(n, p, ROUGH_CHI2):
+            self._say("the trust region shrank below the test's smallest step: no verified gain")
+            return True
+        message = (
+            f"local optimum to the expensive solver's resolution: the corrected model promises "
+            f"{100 * promise:.2g} % lower RMSE within ±{100 * FIRST_ORDER_BOX:g} % of each range "
+            f"(under {ROUGH_CHI2:g} units of χ²), and none of its proposals down to ±"
+            f"{self.radius:.2g} of the fit coordinates verified a gain — at a point "
+            f"{self.problem.spec.solver} verified"
+        )
+        self.fits = [f for f in self.fits if not np.array_equal(f.theta, test.theta)]
+        self.fits.append(replace(test, converged=True, message=message))
+        self._say(message)
+        return True
 
     def _test(self, model: ResidualModel, point: VerifiedPoint) -> LocalFit:
         """The corrected model's first-order test at a verified point; ``fits`` keeps the

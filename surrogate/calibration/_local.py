@@ -33,7 +33,7 @@ does deliver, the fit goes on from that better point.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -288,7 +288,8 @@ class LocalFit:
     −1/+1 where a parameter sits at its lower/upper bound (0 inside; also what
     ``least_squares`` reported as an active bound);
     ``predicted_gain`` the relative RMSE decrease the Gauss–Newton model still
-    promises within ``±FIRST_ORDER_BOX`` (None where the test did not run);
+    promises within ``±FIRST_ORDER_BOX`` (None where the test did not run or, in a
+    fit, did not hold; :func:`optimum_test` gives it either way);
     ``converged`` whether the first-order test held; ``message`` says how.
     ``least_squares`` stops early by its loose default ``ftol``/``xtol``; the
     first-order test, not those, decides when the fit is done.
@@ -318,6 +319,7 @@ def local_fit(
     max_evaluations: int = 60,
     jacobian_refresh: int = 5,
     rounds: int = _ROUNDS,
+    radius: float | None = None,
 ) -> LocalFit:
     """Bounded trust-region least squares (``scipy.optimize.least_squares``, trf) from ``theta``,
     until the first-order test holds at a verified point.
@@ -327,21 +329,29 @@ def local_fit(
     round starts there (at most ``rounds`` rounds). Stops early, unconverged, when
     the budget of ``model`` is spent. Raises :class:`SolverFailed` if the solver
     fails at ``theta`` itself.
+
+    ``radius``: the fit stays within ``±radius`` of ``theta`` in every fit coordinate
+    and returns where ``least_squares`` stops there, untested (one round: a proposal
+    of a model, such as the multi-fidelity loop's corrected model, for another solver
+    to verify).
     """
     x = model.pin(theta)
     model.fd_step = FD_STEP_UNIT  # a step shrunk in an earlier fit does not carry over
     active = np.zeros(x.size, dtype=int)
     reason = "no round run"
+    low, high = np.zeros(x.size), np.ones(x.size)
+    if radius is not None:
+        low, high = np.maximum(low, x - radius), np.minimum(high, x + radius)
     try:
         if model.evaluate(x)[1] is None:
             raise SolverFailed(model.runs.failures[-1] if model.runs.failures else "solver failed")
-        for _ in range(rounds):
-            x = model.coordinates.canonical(x)
+        for _ in range(rounds if radius is None else 1):
+            x = np.clip(model.coordinates.canonical(x), low, high)
             found = least_squares(
                 model.residual,
                 x,
                 jac=_BroydenJacobian(model, jacobian_refresh),
-                bounds=(0.0, 1.0),
+                bounds=(low, high),
                 method="trf",
                 ftol=ftol,
                 xtol=xtol,
@@ -349,6 +359,10 @@ def local_fit(
                 max_nfev=max_evaluations,
             )
             x, active = model.coordinates.canonical(found.x), found.active_mask
+            if radius is not None:
+                active = np.zeros(x.size, dtype=int)  # the region's bounds are not the box's
+                reason = f"the best point within ±{radius:.3g} of the start (fit coordinates)"
+                break
             test = _first_order_test(model, x)
             if test.holds:
                 return _result(model, x, active, test)
@@ -371,9 +385,8 @@ def optimum_test(model: ResidualModel, theta: np.ndarray) -> LocalFit:
     if model.evaluate(x)[1] is None:
         raise SolverFailed(model.runs.failures[-1] if model.runs.failures else "solver failed")
     test = _first_order_test(model, x)
-    return _result(
-        model, x, np.zeros(x.size, dtype=int), test if test.holds else None, test.message
-    )
+    fit = _result(model, x, np.zeros(x.size, dtype=int), test if test.holds else None, test.message)
+    return replace(fit, predicted_gain=test.predicted_gain)
 
 
 @dataclass(frozen=True)

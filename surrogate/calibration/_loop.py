@@ -218,15 +218,19 @@ def determination_at(problem: CalibrationProblem, fit: LocalFit) -> Any:
 
 
 def along_least_determined(
-    problem: CalibrationProblem, fit: LocalFit, determination: Any, step: float
+    problem: CalibrationProblem,
+    fit: LocalFit,
+    determination: Any,
+    step: float,
+    signs: tuple[float, ...] = (1.0, -1.0),
 ) -> list[np.ndarray]:
-    """Points ``step`` of a range either way from a fit along the direction its curves
-    determine least (the last of ``determination.directions``), within the bounds and
-    outside the first-order test's box."""
+    """Points ``step`` of a range either way (``signs``) from a fit along the direction
+    its curves determine least (the last of ``determination.directions``), within the
+    bounds and outside the first-order test's box."""
     weights = determination.directions[-1]["weights"]  # in the declared scale z
     move = np.array([weights.get(p.name, 0.0) / p.span for p in problem.space])
     move *= step / np.max(np.abs(move))
-    units = [np.clip(fit.unit + sign * move, 0.0, 1.0) for sign in (1.0, -1.0)]
+    units = [np.clip(fit.unit + sign * move, 0.0, 1.0) for sign in signs]
     units = [u for u in units if np.max(np.abs(u - fit.unit)) > FIRST_ORDER_BOX]
     return [problem.space.clip(problem.space.from_unit(u[None, :])[0]) for u in units]
 
