@@ -14,9 +14,10 @@ correction and ``rough`` (a ripple in D far shorter than the discrepancy's lengt
 scale) make the two cases it must refuse; ``thick`` a change of shape with Tcoat at fixed D
 and Mp, which the built-in curves hardly show (CalculiX's coarse mesh does: 20 % more
 Tcoat at the same D and Mp moved a fit's RMSE from 0.044 to 0.19 N). Like CalculiX it
-refuses a bare-webbing stiffness (``membrane_bending``). Every run appends its input hash to the
-file named by ``$SURROGATE_TEST_SOLVER_LOG`` (when set), so a test counts the
-expensive runs.
+refuses a bare-webbing stiffness (``membrane_bending``); ``fail_above_tcoat_mm`` makes
+it fail where the coat is thicker, as ccx stops short for thick coats. Every run appends
+its input hash to the file named by ``$SURROGATE_TEST_SOLVER_LOG`` (when set), so a test
+counts the expensive runs.
 """
 
 from __future__ import annotations
@@ -43,7 +44,14 @@ class DistortedSolver(Solver):
 
     name: ClassVar[str] = "test-distorted"
     version: ClassVar[str] = "test-distorted-1"
-    settings_keys: ClassVar[tuple[str, ...]] = ("offset", "slope", "bend", "rough", "thick")
+    settings_keys: ClassVar[tuple[str, ...]] = (
+        "offset",
+        "slope",
+        "bend",
+        "rough",
+        "thick",
+        "fail_above_tcoat_mm",
+    )
 
     def refuses(self, state: Any) -> str | None:
         """Like CalculiX, no bare-webbing stiffness: a diagnosis skips membrane_bending."""
@@ -61,6 +69,9 @@ class DistortedSolver(Solver):
             return failed_result(refused)
         settings = {"offset": -0.03, "slope": 0.01, "bend": 0.02, "rough": 0.0, "thick": 0.0}
         settings.update(inputs.get("solver_settings") or {})
+        limit = settings.get("fail_above_tcoat_mm")
+        if limit is not None and model_state(inputs).tcoat_mm > limit:
+            return failed_result(f"stopped at 84.3° (a coat thicker than {limit} mm)")
         plain = {k: v for k, v in inputs.items() if k != "solver_settings"}
         result = get_solver("builtin").solve({**plain, "solver": "builtin"})
         if result["status"] != "ok":

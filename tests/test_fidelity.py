@@ -268,6 +268,33 @@ def test_calibration_reaches_the_expensive_solvers_noise_floor_in_few_expensive_
     assert any(reported == pytest.approx(100 * (r - 1), abs=1e-6) for r in ratios)
 
 
+FAILING = [  # (truth, the Tcoat above which the expensive solver fails, seed)
+    (0, 0.0205, 1),  # the corrected optimum and both nearer probes fail: the farther one runs
+    (0, 0.0202, 0),
+    (1, 0.0122, 2),  # proposals fail too: the trust region shrinks and the loop goes on
+]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", FAILING)
+def test_calibration_goes_on_where_the_expensive_solver_fails(distorted_solver, log_runs, case):
+    """An expensive solver that stops short for coats just thicker than the truth's (as
+    ccx's coarse mesh does for thick coats): the built-in valley's optimum, probes and
+    proposals there fail; the calibration still reaches the noise floor, ``converged``,
+    in at most 30 expensive runs — failed runs counted."""
+    index, limit, seed = case
+    truth = TRUTHS[index]
+    settings = f"thick = 0.15\nfail_above_tcoat_mm = {limit}"
+    path = _calibration_study(log_runs / "cal", BENDING, truth, seed=seed, settings=settings)
+    floor = _truth_rmse(path, truth, {"thick": 0.15, "fail_above_tcoat_mm": limit})
+    before = _expensive_runs(log_runs)
+    result = surrogate.calibrate(path, progress=False)
+    assert result.status == "converged" and result.misfit == "within the noise", result.message
+    assert result.rmse_n <= 1.05 * floor and result.params["tcoat_mm"] <= limit
+    assert result.solver_calls == _expensive_runs(log_runs) - before <= 30
+    assert result.multi_fidelity["dropped"] is None
+
+
 DIAGNOSIS_TESTS = [
     {"test_id": "a1", "tension_n": 0.0, "direction": "warp", "temperature_c": 21.0},
     {"test_id": "a2", "tension_n": 0.0, "direction": "warp", "temperature_c": 24.5},
@@ -324,3 +351,35 @@ def test_a_resumed_or_worker_run_repeats_no_expensive_run(distorted_solver, log_
     assert parallel.verified == first.verified
     assert parallel.solver_calls == first.solver_calls
     assert _expensive_runs(log_runs) == runs + first.solver_calls
+
+
+def test_the_trust_region_follows_the_verified_over_predicted_decrease():
+    """The ratio test of the corrected model's proposals (Alexandrov et al. 1998): a
+    proposal that verified less than a quarter of its predicted decrease — or that the
+    expensive solver could not run — shrinks the region to a quarter of its step; one
+    that verified more than three quarters at the region's edge doubles it, up to the
+    whole range; in between, or short of the edge, it stays."""
+    from surrogate.calibration._fidelity import CorrectedCalibration
+    from surrogate.calibration._loop import VerifiedPoint
+
+    loop = CorrectedCalibration.__new__(CorrectedCalibration)  # the rule alone, no problem
+    loop.progress, loop.label, loop.dropped = False, "rule", None
+
+    def after(radius, before, predicted, step, verified):
+        """The radius after a proposal from RMSE ``before`` predicted at ``predicted``,
+        ``step`` long, verified at ``verified`` (None: the expensive solver failed)."""
+        loop.radius, loop._proposal = radius, (before, predicted, step)
+        point = VerifiedPoint(np.zeros(3), verified or 0.0, {}, None, [], np.zeros(0), 0, "")
+        loop.verified = [point]
+        loop._manage_radius(verified is not None)
+        return loop.radius
+
+    assert after(1.0, 0.10, 0.06, 0.2, None) == pytest.approx(0.05)  # failed: ρ = −∞
+    assert after(1.0, 0.10, 0.06, 0.2, 0.11) == pytest.approx(0.05)  # worse: ρ < 0
+    assert after(1.0, 0.10, 0.06, 0.2, 0.095) == pytest.approx(0.05)  # ρ = 0.125
+    assert after(0.2, 0.10, 0.06, 0.2, 0.09) == pytest.approx(0.2)  # ρ = 0.25 … 0.75: kept
+    assert after(0.2, 0.10, 0.06, 0.2, 0.065) == pytest.approx(0.4)  # ρ > 0.75 at the edge
+    assert after(0.2, 0.10, 0.06, 0.05, 0.065) == pytest.approx(0.2)  # … inside: kept
+    assert after(0.8, 0.10, 0.06, 0.8, 0.06) == pytest.approx(1.0)  # at most the whole range
+    loop.dropped = "too large"  # a dropped correction: no more proposals, nothing to manage
+    assert after(0.8, 0.10, 0.06, 0.8, None) == pytest.approx(0.8)

@@ -16,7 +16,8 @@ The scheme's rules are :mod:`surrogate.solvers._fidelity`'s. Here:
   verified point*: ``converged`` when it holds; else the local phase on the corrected
   model from there, and (2) again. Where the correction is too large or too irregular
   it is dropped, and the expensive solver's own local phase finishes from the best
-  verified point.
+  verified point; where the expensive solver could run none of the first points, its
+  own calibration (today's loop) spends what is left of the budget.
 """
 
 from __future__ import annotations
@@ -62,7 +63,7 @@ CURVE_PRIOR_SD = 0.05  # asinh scale ≈ log F: before any expensive run, ~5 % a
 CURVE_NOISE_SD = 1e-3  # the expensive curve's own scatter (mesh, increments): ~0.1 %
 LOW_FIDELITY_BUDGET = 1000  # built-in runs of the first, built-in-only calibration
 PROBE_STEP = 0.25  # the probes: a quarter of a range either way, least determined direction
-# (half that where the expensive solver cannot run the first)
+# (then half or twice that where the expensive solver cannot run the first: ``_probes``)
 # the trust region of the corrected model's proposals (Alexandrov, Dennis, Lewis & Torczon
 # 1998: a model managed by the ratio of the verified to the predicted decrease)
 SHRINK_BELOW, EXPAND_ABOVE = 0.25, 0.75  # ratios: a quarter of the step / twice the radius
@@ -190,15 +191,19 @@ class CorrectedCalibration(CalibrationLoop):
         start = self._corrected_optimum(surrogate_trials)
         if start is None:
             return
-        theta, probes = start
+        theta, fit = start
         G = len(self.problem.groups)
-        self._teach(theta)  # a point the expensive solver cannot run is left out
-        for tries in probes:  # the nearer probe only where the expensive solver failed
+        ran = self._teach(theta)  # a point the expensive solver cannot run is left out
+        probes = self._probes(fit, ran) if fit is not None and not self.correction.n_runs else []
+        for tries in probes:  # the second probe only where the expensive solver failed
             for point in tries:
                 if self.runs.calls + G > self.budget or self.dropped is not None:
                     break
                 if self._teach(point):
                     break
+        if not self.verified:  # nothing verified to go on from
+            self._single_fidelity(surrogate_trials)
+            return
         while self.verified and self.dropped is None and self.runs.calls + G <= self.budget:
             theta = self._next()
             if theta is None:
@@ -213,9 +218,9 @@ class CorrectedCalibration(CalibrationLoop):
 
     def _corrected_optimum(
         self, surrogate_trials: int
-    ) -> tuple[np.ndarray, list[list[np.ndarray]]] | None:
+    ) -> tuple[np.ndarray, LocalFit | None] | None:
         """The corrected model calibrated as a built-in study (built-in runs only): its
-        optimum, and the probes along what the built-in model leaves undetermined."""
+        optimum, and its local fit there (None where the best point is no fit's)."""
         low = self.corrected_runs(self.correction)
         loop = CalibrationLoop(
             self.problem,
@@ -232,18 +237,19 @@ class CorrectedCalibration(CalibrationLoop):
         if best is None:
             return None
         if fit is None or fit.rmse > best.rmse:
-            return np.asarray(best.theta, dtype=float), []
-        probes = self._probes(fit) if not self.correction.n_runs else []
-        return np.asarray(fit.theta, dtype=float), probes
+            return np.asarray(best.theta, dtype=float), None
+        return np.asarray(fit.theta, dtype=float), fit
 
-    def _probes(self, fit: LocalFit) -> list[list[np.ndarray]]:
+    def _probes(self, fit: LocalFit, ran: bool) -> list[list[np.ndarray]]:
         """Where the expensive solver first teaches the correction, besides the built-in
         optimum: both ends of a ``PROBE_STEP`` of each range along the direction the
         built-in model's curves determine least — where it leaves a parameter free —
-        each with the point half as far, for where the expensive solver cannot run the
-        first (ccx at 85° at a CalculiX mid coating's probes). Only for a correction that
-        has learned nothing yet (a diagnosis's later calibrations share the current
-        model's).
+        each with a second point for where the expensive solver cannot run the first
+        (ccx at 85° at a CalculiX mid coating's probes): half as far where it ran the
+        optimum (``ran``), twice as far where it could not (the optimum lies in the
+        region it fails in: a thick coat in the built-in valley, seen with a test solver
+        failing above the truth's Tcoat). Only for a correction that has learned nothing
+        yet (a diagnosis's later calibrations share the current model's).
 
         Along that direction the built-in curves hardly change (a thin coat's Tcoat at
         fixed D and Mp), so the search cannot tell its points apart until ``δ`` has seen
@@ -257,7 +263,7 @@ class CorrectedCalibration(CalibrationLoop):
         probes = [
             [
                 point
-                for step in (PROBE_STEP, PROBE_STEP / 2)
+                for step in (PROBE_STEP, PROBE_STEP / 2 if ran else 2 * PROBE_STEP)
                 for point in along_least_determined(
                     self.problem, fit, determination, step, signs=(sign,)
                 )
@@ -470,6 +476,19 @@ class CorrectedCalibration(CalibrationLoop):
             curves=point.curves,
             message=message,
         )
+
+    def _single_fidelity(self, surrogate_trials: int) -> None:
+        """Today's loop on the expensive solver (its design, surrogate and local phase),
+        where it could run neither the corrected model's optimum nor the probes (ccx
+        stopping short for every thick coat near a built-in optimum): the budget left."""
+        if self.dropped is None:
+            self.dropped, self.dropped_after = (
+                "the expensive solver could run neither the corrected model's optimum nor "
+                "the points along its least determined direction",
+                self.runs.calls,
+            )
+        self._say(f"{self.dropped}: the single-fidelity loop takes over")
+        CalibrationLoop.run(self, surrogate_trials)
 
     def _fall_back(self, why: str | None = None) -> None:
         """The expensive solver's own local phase from the best verified point."""

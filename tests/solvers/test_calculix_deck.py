@@ -150,7 +150,8 @@ def test_ccx_stopping_is_a_failed_run_with_its_reason(tmp_path, monkeypatch, exi
     point = {"ecoat_gpa": 1.0, "scoat_gpa": 0.2, "tcoat_mm": 0.012}
     result = solve_inputs(solver_inputs(point, Rig(), solver="calculix", solver_settings=settings))
     assert result["status"] == "failed"
-    stopped = "ccx did not reach 90°: *ERROR: too many cutbacks (last converged 26.25°)"  # 10th block
+    # the 10th block
+    stopped = "ccx did not reach 90°: *ERROR: too many cutbacks (last converged 26.25°)"
     # The stand-in stops the same way when retried with smaller increments: both reasons named.
     assert result["reason"] == f"{stopped}; again with increments of at most 1.5°: {stopped}"
     assert list((tmp_path / "work").iterdir()) == []
