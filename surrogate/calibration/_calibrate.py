@@ -245,6 +245,8 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
     multi = _multi_fidelity(loop, best)
     if multi is not None:
         message += multi.pop("sentence")
+        if misfit == "systematic" and isinstance(loop, CorrectedCalibration):
+            message += loop.basin_caveat()
     return replace(result, message=message, multi_fidelity=multi)
 
 

@@ -500,6 +500,21 @@ class CorrectedCalibration(CalibrationLoop):
         self._say(f"{why + ': ' if why else ''}the expensive solver's own local phase takes over")
         self._local(ResidualModel(self.problem, self.runs, budget=self.budget), start)
 
+    def basin_caveat(self) -> str:
+        """What a systematic misfit at a converged point cannot rule out here, and what
+        would tell (seen on CalculiX-made curves of a mid coating: a local optimum of
+        ccx's misfit at 3.3 × the truth's RMSE, Tcoat 0.042 mm against 0.02)."""
+        if self.dropped is not None:
+            return ""  # today's loop finished: its own global phase searched the basins
+        kind = self.problem.spec.solver
+        return (
+            f". The misfit may also be a basin of {kind}'s that the built-in model does not "
+            f"have: the global search ran on the corrected model before the {kind} runs "
+            f"taught it (near the answer only); a calibration with `[solver] multi_fidelity "
+            f"= false` ({kind}'s own global phase) or `surrogate compare --params` at a "
+            f"coating you expect would tell"
+        )
+
     def correction_at(self, point: VerifiedPoint | None) -> Correction | None:
         """The size of the correction at a verified point (None if not measured)."""
         return None if point is None else self.corrections.get(point.keys[0])
