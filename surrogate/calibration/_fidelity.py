@@ -170,6 +170,7 @@ class CorrectedCalibration(CalibrationLoop):
         self.dropped_after = 0
         self.corrections: dict[str, Correction] = {}  # by the verified point's first key
         self.fallen_back: str | None = None  # why the expensive local phase finished
+        self.single_fidelity = False  # whether today's whole loop ran on the expensive solver
         self.radius = 1.0  # the trust region of the proposals, in fit coordinates
         self._proposal: tuple[float, float, float] | None = None  # best, predicted RMSE, step
 
@@ -488,6 +489,7 @@ class CorrectedCalibration(CalibrationLoop):
                 self.runs.calls,
             )
         self._say(f"{self.dropped}: the single-fidelity loop takes over")
+        self.single_fidelity = True
         CalibrationLoop.run(self, surrogate_trials)
 
     def _fall_back(self, why: str | None = None) -> None:
@@ -504,8 +506,8 @@ class CorrectedCalibration(CalibrationLoop):
         """What a systematic misfit at a converged point cannot rule out here, and what
         would tell (seen on CalculiX-made curves of a mid coating: a local optimum of
         ccx's misfit at 3.3 × the truth's RMSE, Tcoat 0.042 mm against 0.02)."""
-        if self.dropped is not None:
-            return ""  # today's loop finished: its own global phase searched the basins
+        if self.single_fidelity:
+            return ""  # today's loop ran: its own global phase searched the basins
         kind = self.problem.spec.solver
         return (
             f". The misfit may also be a basin of {kind}'s that the built-in model does not "
