@@ -295,6 +295,27 @@ def test_calibration_goes_on_where_the_expensive_solver_fails(distorted_solver, 
     assert result.multi_fidelity["dropped"] is None
 
 
+@pytest.mark.slow
+def test_where_the_expensive_solver_runs_none_of_the_corrected_points_todays_loop_tries(
+    distorted_solver, log_runs
+):
+    """The early-yield truth (Tcoat 0.05 mm) with an expensive solver failing above
+    0.0505 mm: the built-in valley's optimum lies at 0.08 mm and the corrected model has
+    no point the solver runs, so today's loop takes over on the expensive solver (its
+    Latin hypercube runs thin coats); finding no point it runs at both tests either, the
+    calibration ends with a one-line error naming the solver's reason and the fix."""
+    settings = "thick = 0.15\nfail_above_tcoat_mm = 0.0505"
+    path = _calibration_study(log_runs / "cal", BENDING, TRUTHS[2], seed=1, settings=settings)
+    before = _expensive_runs(log_runs)
+    with pytest.raises(surrogate.InputDataError) as error:
+        surrogate.calibrate(path, progress=False)
+    message = str(error.value)
+    assert "found no parameter point the solver could run at every test" in message
+    assert "a coat thicker than 0.0505 mm" in message and "check the parameter ranges" in message
+    assert "\n" not in message
+    assert 4 < _expensive_runs(log_runs) - before <= 30  # today's loop ran after the first points
+
+
 DIAGNOSIS_TESTS = [
     {"test_id": "a1", "tension_n": 0.0, "direction": "warp", "temperature_c": 21.0},
     {"test_id": "a2", "tension_n": 0.0, "direction": "warp", "temperature_c": 24.5},
