@@ -208,10 +208,15 @@ def _correction(loop: CalibrationLoop, say: _Say) -> CurveCorrection | None:
 
 def _verified_refit(problem: CalibrationProblem, loop: CalibrationLoop, noise: float) -> _Refit:
     """The current model at its expensive-verified calibrated point, as a refit: the
-    expensive residual, the corrected model's Jacobian for the held-out error."""
+    expensive residual, the corrected model's Jacobian for the held-out error (also
+    where the expensive solver's own local phase ended without one: budget spent)."""
+    assert isinstance(loop, CorrectedCalibration)
     fit = loop.best_fit()
     assert fit is not None  # a corrected calibration tests every point it verifies
-    heldout = _heldout(problem, fit.residual, fit.jacobian, fit.at_bound, noise)
+    jacobian = fit.jacobian
+    if not np.all(np.isfinite(jacobian)):
+        jacobian = loop.corrected_jacobian(fit.theta)
+    heldout = _heldout(problem, fit.residual, jacobian, fit.at_bound, noise)
     return _Refit(None, problem.space.names, fit.theta, fit.residual, fit.curves, heldout, set())
 
 
