@@ -142,3 +142,39 @@ def test_the_fit_coordinates_round_trip_and_hold_a_clipped_coat_at_its_bound():
         coordinates.canonical(coordinates.canonical(x)), coordinates.canonical(x)
     )
     assert coordinates.canonical(x)[0] < 1.0  # the log D that holds Ecoat exactly at its bound
+
+
+def test_a_combination_the_valley_hardly_moves_is_determined_to_that_move():
+    """Exactly collinear columns: a − b is undetermined. exp(a + b) does not load on it
+    (the textbook interval); exp(1.001 a + b) loads on it by 0.001/√2 and moves by 0.002
+    along its chord in the box (2√2) — counted in its half-width, not made infinite (a
+    rule that made D undetermined on one BLAS and determined on another)."""
+    rng = np.random.default_rng(0)
+    n = 300
+    x = rng.standard_normal(n)
+    X = np.column_stack([x, x])
+    residual = 0.1 * rng.standard_normal(n)
+    low, high = np.full(2, -1.0), np.full(2, 1.0)
+    found = determine(
+        NAMES,
+        low,
+        high,
+        np.array([False, False]),
+        np.array([0.2, 0.1]),
+        -X * (high - low),
+        residual,
+        np.zeros(2, dtype=int),
+        combinations={
+            "sum": ("exp(a + b)", lambda p: math.exp(p["a"] + p["b"])),
+            "tilted": ("exp(1.001 a + b)", lambda p: math.exp(1.001 * p["a"] + p["b"])),
+        },
+    )
+    s = math.sqrt(residual @ residual / (n - 2))
+    t = stats.t.ppf(0.975, n - 2)
+    sxx = math.sqrt(x @ x)
+    expected = {"sum": t * s / sxx, "tilted": t * s * 2.001 / (2 * sxx) + 0.002}
+    for key, half in expected.items():
+        assert found.combinations[key]["relative_half_width"] == pytest.approx(
+            math.expm1(half), rel=1e-5
+        )
+    assert found.free == ["a", "b"]

@@ -18,11 +18,13 @@ Notations
     of the largest is not determined at all (infinite variance).
 
 A combination ``f(θ)`` (the bending stiffness ``D``, the plastic moment ``Mp``)
-gets ``var log f = gᵀ C g`` with ``g = ∂ log f / ∂z`` (central differences), its
-95 % interval ``f · exp(± t₀.₉₇₅ · sd)``. A parameter whose 95 % interval spans at
-least ``FREE_SHARE`` of its range is *free*: that wide, the linearisation is not
-trusted (the valley of equally good thin-coat solutions is curved), so its
-interval is the whole range.
+gets ``var log f = gᵀ C g`` with ``g = ∂ log f / ∂z`` (central differences) over the
+determined directions, its 95 % interval ``f · exp(± (t₀.₉₇₅ · sd + m))`` with ``m``
+how far ``log f`` moves along the undetermined directions within the ranges (first
+order; ``_Covariance.spread``). A parameter whose 95 % interval spans at least
+``FREE_SHARE`` of its range is *free*: that wide, the linearisation is not trusted
+(the valley of equally good thin-coat solutions is curved), so its interval is the
+whole range.
 """
 
 from __future__ import annotations
@@ -119,7 +121,7 @@ def determine(
     t = float(stats.t.ppf(0.5 + LEVEL / 2, dof))
     intervals, free, held = _intervals(names, z, z_low, span, log, free_index, covariance, t)
     found = {
-        key: _combination(function, names, z, log, free_index, covariance.sd, t)
+        key: _combination(function, names, z, log, free_index, covariance, span, t)
         for key, (_, function) in combinations.items()
     }
     labels = {key: label for key, (label, _) in combinations.items()}
@@ -156,6 +158,28 @@ class _Covariance:
         eigenvalues, vectors = np.linalg.eigh(jac_z.T @ jac_z)
         largest = max(float(eigenvalues.max(initial=0.0)), 1e-300)
         return cls(sigma, eigenvalues, vectors, eigenvalues > NULL_EIGENVALUE * largest)
+
+    def spread(self, gradient_free: np.ndarray, span_free: np.ndarray) -> tuple[float, float]:
+        """Standard deviation of ``gradient · z`` over the determined directions, and how
+        far ``gradient · z`` moves along the undetermined ones within the ranges (each
+        direction's longest chord in the box of ``span_free``, first order).
+
+        A combination the curves determine (D on a thin coat's Ecoat–Tcoat valley) still
+        loads on the valley by what the linearisation and the finite differences leave
+        (1e-9 of its largest load or more, machine-dependent): counted as the move it
+        allows within the ranges, not as an infinite variance — which made D
+        "undetermined" on one BLAS and determined on another."""
+        loads = self.vectors.T @ gradient_free
+        determined = self.determined
+        sd = self.sigma * math.sqrt(
+            float(np.sum(loads[determined] ** 2 / self.eigenvalues[determined]))
+        )
+        move = 0.0
+        for k in np.flatnonzero(~determined):
+            direction = np.abs(self.vectors[:, k])
+            along = direction > 0
+            move += abs(float(loads[k])) * float(np.min(span_free[along] / direction[along]))
+        return sd, move
 
     def sd(self, gradient_free: np.ndarray) -> float:
         """Standard deviation of ``gradient · z`` (inf along an undetermined direction)."""
@@ -229,7 +253,8 @@ def _combination(
     z: np.ndarray,
     log: np.ndarray,
     free_index: np.ndarray,
-    sd_of: Callable[[np.ndarray], float],
+    covariance: _Covariance,
+    span: np.ndarray,
     t: float,
 ) -> dict[str, float | None]:
     def log_value(zz: np.ndarray) -> float:
@@ -245,7 +270,8 @@ def _combination(
         ]
     )
     value = math.exp(log_value(z))
-    half = t * sd_of(gradient)
+    sd, move = covariance.spread(gradient, span[free_index])
+    half = t * sd + move  # the valley's move within the ranges: a share of it, not a variance
     if not half < 700.0:  # inf, or exp would overflow: a direction the curves do not determine
         return {"value": value, "low": None, "high": None, "relative_half_width": None}
     return {
