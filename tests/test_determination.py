@@ -55,16 +55,13 @@ def test_intervals_are_the_textbook_ones_for_a_linear_model(seed):
     assert found.sigma_n == pytest.approx(math.sqrt(s2))
 
 
-@pytest.mark.parametrize("seed", range(5))
-def test_a_valley_leaves_the_parameters_free_but_determines_their_combination(seed):
-    """Nearly collinear columns: a and b apart are free, a + b is determined."""
-    rng = np.random.default_rng(seed)
-    n = 300
-    x = rng.standard_normal(n)
-    X = np.column_stack([x, x + 1e-4 * rng.standard_normal(n)])
-    residual = 0.1 * rng.standard_normal(n)
+SUM = {"sum": ("exp(a + b)", lambda p: math.exp(p["a"] + p["b"]))}
+
+
+def _on_a_valley(X, residual, combinations):
+    """``determine`` for a linear problem on [−1, 1]² at (0.2, 0.1)."""
     low, high = np.full(2, -1.0), np.full(2, 1.0)
-    found = determine(
+    return determine(
         NAMES,
         low,
         high,
@@ -73,8 +70,19 @@ def test_a_valley_leaves_the_parameters_free_but_determines_their_combination(se
         -X * (high - low),
         residual,
         np.zeros(2, dtype=int),
-        combinations={"sum": ("exp(a + b)", lambda p: math.exp(p["a"] + p["b"]))},
+        combinations=combinations,
     )
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_valley_leaves_the_parameters_free_but_determines_their_combination(seed):
+    """Nearly collinear columns: a and b apart are free, a + b is determined."""
+    rng = np.random.default_rng(seed)
+    n = 300
+    x = rng.standard_normal(n)
+    X = np.column_stack([x, x + 1e-4 * rng.standard_normal(n)])
+    residual = 0.1 * rng.standard_normal(n)
+    found = _on_a_valley(X, residual, SUM)
     assert found.free == ["a", "b"]
     assert found.intervals["a"] == [-1.0, 1.0]  # free: the whole range, not a linearisation
     assert found.combinations["sum"]["relative_half_width"] < 0.05
@@ -154,21 +162,8 @@ def test_a_combination_the_valley_hardly_moves_is_determined_to_that_move():
     x = rng.standard_normal(n)
     X = np.column_stack([x, x])
     residual = 0.1 * rng.standard_normal(n)
-    low, high = np.full(2, -1.0), np.full(2, 1.0)
-    found = determine(
-        NAMES,
-        low,
-        high,
-        np.array([False, False]),
-        np.array([0.2, 0.1]),
-        -X * (high - low),
-        residual,
-        np.zeros(2, dtype=int),
-        combinations={
-            "sum": ("exp(a + b)", lambda p: math.exp(p["a"] + p["b"])),
-            "tilted": ("exp(1.001 a + b)", lambda p: math.exp(1.001 * p["a"] + p["b"])),
-        },
-    )
+    tilted = ("exp(1.001 a + b)", lambda p: math.exp(1.001 * p["a"] + p["b"]))
+    found = _on_a_valley(X, residual, {**SUM, "tilted": tilted})
     s = math.sqrt(residual @ residual / (n - 2))
     t = stats.t.ppf(0.975, n - 2)
     sxx = math.sqrt(x @ x)
