@@ -64,13 +64,14 @@ class DistortedSolver(Solver):
         if log:
             with open(log, "a", encoding="utf-8") as handle:
                 handle.write(f"{input_hash(inputs)}\n")
-        refused = self.refuses(model_state(inputs))
+        state = model_state(inputs)
+        refused = self.refuses(state)
         if refused is not None:
             return failed_result(refused)
         settings = {"offset": -0.03, "slope": 0.01, "bend": 0.02, "rough": 0.0, "thick": 0.0}
         settings.update(inputs.get("solver_settings") or {})
         limit = settings.get("fail_above_tcoat_mm")
-        if limit is not None and model_state(inputs).tcoat_mm > limit:
+        if limit is not None and state.tcoat_mm > limit:
             return failed_result(f"stopped at 84.3° (a coat thicker than {limit} mm)")
         plain = {k: v for k, v in inputs.items() if k != "solver_settings"}
         result = get_solver("builtin").solve({**plain, "solver": "builtin"})

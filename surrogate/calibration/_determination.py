@@ -170,23 +170,23 @@ class _Covariance:
         allows within the ranges, not as an infinite variance — which made D
         "undetermined" on one BLAS and determined on another."""
         loads = self.vectors.T @ gradient_free
-        determined = self.determined
-        sd = self.sigma * math.sqrt(
-            float(np.sum(loads[determined] ** 2 / self.eigenvalues[determined]))
-        )
         move = 0.0
-        for k in np.flatnonzero(~determined):
+        for k in np.flatnonzero(~self.determined):
             direction = np.abs(self.vectors[:, k])
             along = direction > 0
             move += abs(float(loads[k])) * float(np.min(span_free[along] / direction[along]))
-        return sd, move
+        return self._determined_sd(loads), move
 
     def sd(self, gradient_free: np.ndarray) -> float:
         """Standard deviation of ``gradient · z`` (inf along an undetermined direction)."""
         loads = self.vectors.T @ gradient_free
-        determined = self.determined
-        if np.any(np.abs(loads[~determined]) > 1e-9 * max(np.abs(loads).max(), 1e-300)):
+        if np.any(np.abs(loads[~self.determined]) > 1e-9 * max(np.abs(loads).max(), 1e-300)):
             return math.inf
+        return self._determined_sd(loads)
+
+    def _determined_sd(self, loads: np.ndarray) -> float:
+        """``σ · √(Σ load² / λ)`` over the determined eigen-directions."""
+        determined = self.determined
         return self.sigma * math.sqrt(
             float(np.sum(loads[determined] ** 2 / self.eigenvalues[determined]))
         )

@@ -215,7 +215,7 @@ def _verified_refit(problem: CalibrationProblem, loop: CalibrationLoop, noise: f
     assert fit is not None  # a corrected calibration tests every point it verifies
     jacobian = fit.jacobian
     if not np.all(np.isfinite(jacobian)):
-        jacobian = loop.corrected_jacobian(fit.theta)
+        jacobian = loop.corrected_jacobian(fit.unit)  # where the fit's own was taken
     heldout = _heldout(problem, fit.residual, jacobian, fit.at_bound, noise)
     return _Refit(None, problem.space.names, fit.theta, fit.residual, fit.curves, heldout, set())
 

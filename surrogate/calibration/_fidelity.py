@@ -517,12 +517,11 @@ class CorrectedCalibration(CalibrationLoop):
             f"coating you expect would tell"
         )
 
-    def corrected_jacobian(self, theta: np.ndarray) -> np.ndarray:
-        """The corrected model's ``∂r/∂u`` at ``theta`` (built-in runs only), for the
-        statistics that need a Jacobian where the expensive solver's own local phase
-        ended without its own (budget spent: NaN)."""
+    def corrected_jacobian(self, unit: np.ndarray) -> np.ndarray:
+        """The corrected model's ``∂r/∂u`` at unit coordinates ``unit`` (built-in runs
+        only), for the statistics that need a Jacobian where the expensive solver's own
+        local phase ended without its own (budget spent: NaN)."""
         model = ResidualModel(self.problem, self.corrected_runs(self.correction))
-        unit = np.clip(self.problem.space.to_unit(theta[None, :])[0], 0.0, 1.0)
         try:
             return model.unit_jacobian(unit)
         finally:
