@@ -408,7 +408,7 @@ def test_the_trust_region_follows_the_verified_over_predicted_decrease():
     from surrogate.calibration._loop import VerifiedPoint
 
     loop = CorrectedCalibration.__new__(CorrectedCalibration)  # the rule alone, no problem
-    loop.progress, loop.label, loop.dropped = False, "rule", None
+    loop.progress, loop.label, loop.dropped, loop.delivered_in_box = False, "rule", None, []
 
     def after(radius, before, predicted, step, verified):
         """The radius after a proposal from RMSE ``before`` predicted at ``predicted``,
@@ -428,6 +428,96 @@ def test_the_trust_region_follows_the_verified_over_predicted_decrease():
     assert after(0.8, 0.10, 0.06, 0.8, 0.06) == pytest.approx(1.0)  # at most the whole range
     loop.dropped = "too large"  # a dropped correction: no more proposals, nothing to manage
     assert after(0.8, 0.10, 0.06, 0.8, None) == pytest.approx(0.8)
+
+
+def test_the_probes_run_after_a_corrected_optimum_the_expensive_solver_ran(
+    distorted_solver, log_runs, monkeypatch
+):
+    """Where the built-in curves leave a parameter free, the expensive solver's next runs
+    after the corrected model's optimum are the probes along the least determined
+    direction, whether or not it ran the optimum (the choice was read after the first
+    runs had taught the correction: from then on the probes ran only where the optimum
+    failed)."""
+    from surrogate.calibration._fidelity import CorrectedCalibration
+
+    class Enough(Exception):
+        pass
+
+    taught: list[tuple[np.ndarray, bool]] = []
+    probes: list[list[list[np.ndarray]]] = []
+    teach, probe = CorrectedCalibration._teach, CorrectedCalibration._probes
+
+    def spy_teach(self, theta):
+        taught.append((np.array(theta), teach(self, theta)))
+        if len(taught) == 2:
+            raise Enough
+        return taught[-1][1]
+
+    def spy_probes(self, fit, ran):
+        probes.append(probe(self, fit, ran))
+        return probes[-1]
+
+    monkeypatch.setattr(CorrectedCalibration, "_teach", spy_teach)
+    monkeypatch.setattr(CorrectedCalibration, "_probes", spy_probes)
+    truth = TRUTHS[0]
+    settings = " ".join(f"{k} = {v}" for k, v in THICK.items())
+    path = _calibration_study(log_runs / "cal", BENDING, truth, seed=0, settings=settings)
+    with pytest.raises(Enough):
+        surrogate.calibrate(path, progress=False)
+    assert taught[0][1], "the expensive solver ran the corrected optimum"
+    assert len(probes) == 1 and probes[0], "the built-in curves leave a parameter free here"
+    assert np.array_equal(taught[1][0], probes[0][0][0])  # the first probe, the next run
+
+
+def test_a_promise_is_worth_what_the_corrected_models_proposals_delivered():
+    """Once the trust region is below the test's smallest step, the best verified point is
+    a local optimum to the expensive solver's resolution where the corrected model's
+    promise, times the largest share of the predicted decrease its proposals within the
+    test's box delivered (from two of them on), is under ``ROUGH_CHI2`` units of χ² — and
+    only then ``converged``; a proposal outside the box, or one the expensive solver
+    failed, is no evidence. The figures are CalculiX's at the *paper* coating."""
+    from types import SimpleNamespace
+
+    from surrogate.calibration._fidelity import MIN_RADIUS, CorrectedCalibration
+    from surrogate.calibration._local import ROUGH_CHI2, LocalFit, gain_tolerance
+    from surrogate.calibration._loop import VerifiedPoint
+
+    n, rmse = 182, 0.0453
+    problem = SimpleNamespace(n_points=n, space=SimpleNamespace(names=("a", "b", "c")))
+    problem.spec = SimpleNamespace(solver="calculix")
+    loop = CorrectedCalibration.__new__(CorrectedCalibration)
+    loop.progress, loop.label, loop.dropped, loop.problem = False, "rule", None, problem
+    loop.delivered_in_box, loop.radius = [], 1.0
+
+    def propose(before, predicted, step, verified):
+        loop._proposal = (before, predicted, step)
+        point = VerifiedPoint(np.zeros(3), verified or 0.0, {}, None, [], np.zeros(0), 0, "")
+        loop.verified = [point]
+        loop._manage_radius(verified is not None)
+
+    def converged(promise):
+        loop.fits, loop.radius = [], MIN_RADIUS / 2
+        residual = np.full(n, rmse)
+        test = LocalFit(np.ones(3), np.zeros(3), residual, np.zeros(0), np.zeros(0),
+                        np.zeros(3, int), promise, False, "not at a verified local optimum")
+        assert loop._resolved(test)  # below the smallest step: no more proposals either way
+        return bool(loop.fits) and loop.fits[0].converged
+
+    tolerance = gain_tolerance(n, 3, ROUGH_CHI2)  # 0.56 % of the RMSE
+    propose(0.1757, 0.0632, 0.2, 0.0455)  # outside the box: no evidence
+    propose(0.0455, 0.0400, 0.01, None)  # failed: nothing verified
+    assert loop.delivered_in_box == []
+    assert converged(0.5 * tolerance) and not converged(0.039)  # the bare promise
+    propose(0.0455, 0.04186, 0.021, 0.06425)  # worse: delivered −5.1 times the decrease
+    assert not converged(0.039)  # one proposal is not yet evidence
+    propose(0.045505, 0.043825, 0.0053, 0.045344)  # delivered 9.6 %
+    propose(0.045344, 0.044746, 0.0013, 0.04534)  # delivered 0.7 %
+    assert loop.delivered_in_box == pytest.approx([-5.15, 0.0958, 0.0067], abs=0.005)
+    assert converged(0.039)  # 3.9 % promised, worth 0.37 %: under 2 units of χ²
+    assert "delivered at most 9.6 % of the decrease they predicted" in loop.fits[0].message
+    assert not converged(0.09)  # worth 0.86 %: more than the solver's resolution explains
+    loop.radius = 2 * MIN_RADIUS  # the region has not shrunk: the test decides, not this rule
+    assert not loop._resolved(SimpleNamespace(predicted_gain=0.0))
 
 
 def test_the_held_out_error_of_a_verified_fit_without_its_jacobian_is_the_corrected_models(

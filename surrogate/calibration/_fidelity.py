@@ -68,6 +68,7 @@ PROBE_STEP = 0.25  # the probes: a quarter of a range either way, least determin
 # 1998: a model managed by the ratio of the verified to the predicted decrease)
 SHRINK_BELOW, EXPAND_ABOVE = 0.25, 0.75  # ratios: a quarter of the step / twice the radius
 MIN_RADIUS = FIRST_ORDER_BOX / BACKTRACK[-1]  # the smallest step the first-order test tries
+DELIVERY_EVIDENCE = 2  # verified proposals within the test's box before a promise is discounted
 
 
 class CurveCorrection:
@@ -173,6 +174,7 @@ class CorrectedCalibration(CalibrationLoop):
         self.single_fidelity = False  # whether today's whole loop ran on the expensive solver
         self.radius = 1.0  # the trust region of the proposals, in fit coordinates
         self._proposal: tuple[float, float, float] | None = None  # best, predicted RMSE, step
+        self.delivered_in_box: list[float] = []  # the ratios of the proposals within the box
 
     # -- the runs -------------------------------------------------------------------------------
     def corrected_runs(self, correction: CurveCorrection | None) -> CorrectedRuns:
@@ -194,8 +196,9 @@ class CorrectedCalibration(CalibrationLoop):
             return
         theta, fit = start
         G = len(self.problem.groups)
+        fresh = fit is not None and not self.correction.n_runs  # read before it learns
         ran = self._teach(theta)  # a point the expensive solver cannot run is left out
-        probes = self._probes(fit, ran) if fit is not None and not self.correction.n_runs else []
+        probes = self._probes(fit, ran) if fresh else []
         for tries in probes:  # the second probe only where the expensive solver failed
             for point in tries:
                 if self.runs.calls + G > self.budget or self.dropped is not None:
@@ -272,9 +275,12 @@ class CorrectedCalibration(CalibrationLoop):
             for sign in (1.0, -1.0)
         ]
         probes = [tries for tries in probes if tries]
+        weights = determination.directions[-1]["weights"]
+        direction = ", ".join(f"{name} {w:+.2g}" for name, w in weights.items())
         self._say(
             f"the built-in curves leave {', '.join(determination.free)} free: the expensive "
-            f"solver first runs at {len(probes)} point(s) along that direction too"
+            f"solver first runs at {len(probes)} point(s) along the direction they determine "
+            f"least ({direction}) too"
         )
         return probes
 
@@ -340,6 +346,8 @@ class CorrectedCalibration(CalibrationLoop):
         if taught:
             verified = self.verified[-1].rmse
             ratio = (before - verified) / max(before - predicted, 1e-12 * before)
+            if step <= FIRST_ORDER_BOX:
+                self.delivered_in_box.append(float(ratio))
         if ratio < SHRINK_BELOW:
             self.radius = SHRINK_BELOW * step
         elif ratio > EXPAND_ABOVE and step >= 0.9 * self.radius:
@@ -349,22 +357,42 @@ class CorrectedCalibration(CalibrationLoop):
     def _resolved(self, test: LocalFit) -> bool:
         """Whether the trust region has shrunk below ``MIN_RADIUS`` (True: stop proposing);
         then the best verified point is a local optimum to the expensive solver's
-        resolution where the corrected model's promise there is under ``ROUGH_CHI2``
-        units of χ² — the rule of the local phase's first-order test, whose full-solver
-        steps are here the expensive solver's verifications of the shrinking proposals."""
+        resolution where what the corrected model promises there is worth under
+        ``ROUGH_CHI2`` units of χ² — the rule of the local phase's first-order test, whose
+        full-solver steps are here the expensive solver's verifications of the shrinking
+        proposals. A promise is worth what the model has delivered: where at least
+        ``DELIVERY_EVIDENCE`` proposals within the test's box were verified, the promise
+        times the largest share of its predicted decrease any of them delivered
+        (``delivered_in_box``, the ratios of :meth:`_manage_radius`).
+
+        CalculiX's curves change by a few per cent with its increments where the coat
+        yields, so at the noise floor the corrected model kept promising 3–9 % lower RMSE
+        (up to 14 units of χ²) and its proposals delivered 0.6–9.6 % of what they
+        predicted: under the bare promise the loop handed over to CalculiX's own local
+        phase, which spent the budget — 20 runs — for 0.1 % (*paper*,
+        ``benchmarks/fidelity.py``).
+        """
         if self.radius >= MIN_RADIUS:
             return False
         n, p = self.problem.n_points, len(self.problem.space.names)
-        promise = test.predicted_gain
-        if promise is None or promise > gain_tolerance(n, p, ROUGH_CHI2):
+        promise, tolerance = test.predicted_gain, gain_tolerance(n, p, ROUGH_CHI2)
+        delivered = self.delivered_in_box
+        share = max(max(delivered), 0.0) if len(delivered) >= DELIVERY_EVIDENCE else 1.0
+        if promise is None or promise * share > tolerance:
             self._say("the trust region shrank below the test's smallest step: no verified gain")
             return True
+        worth = (
+            ""
+            if promise <= tolerance
+            else f"; its {len(delivered)} proposals within that box delivered at most "
+            f"{100 * share:.2g} % of the decrease they predicted: worth ≤ {100 * promise * share:.2g} %"
+        )
         message = (
             f"local optimum to the expensive solver's resolution: the corrected model promises "
-            f"{100 * promise:.2g} % lower RMSE within ±{100 * FIRST_ORDER_BOX:g} % of each range "
-            f"(under {ROUGH_CHI2:g} units of χ²), and none of its proposals down to ±"
-            f"{self.radius:.2g} of the fit coordinates verified a gain — at a point "
-            f"{self.problem.spec.solver} verified"
+            f"{100 * promise:.2g} % lower RMSE within ±{100 * FIRST_ORDER_BOX:g} % of each range"
+            f"{worth} (under {ROUGH_CHI2:g} units of χ²), and none of its proposals down to "
+            f"±{self.radius:.2g} of the fit coordinates verified the decrease it predicted — at "
+            f"a point {self.problem.spec.solver} verified"
         )
         self.fits = [f for f in self.fits if not np.array_equal(f.theta, test.theta)]
         self.fits.append(replace(test, converged=True, message=message))
