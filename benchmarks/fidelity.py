@@ -18,7 +18,7 @@ diagnosis on curves CalculiX made, the built-in solver as its prior.
 
 Every figure is printed with the machine; ``--work DIR`` keeps the study folders (their
 result caches let a second run reuse the CalculiX runs: a cached run still counts as a
-CalculiX run of the calibration it belongs to).
+CalculiX run of the calibration it belongs to), each with its ``progress.log``.
 
 Run: .venv/bin/python benchmarks/fidelity.py [--only calibration,diagnosis] [--jobs 2]
      [--work DIR] [--out fidelity.json]
@@ -27,12 +27,15 @@ Run: .venv/bin/python benchmarks/fidelity.py [--only calibration,diagnosis] [--j
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import logging
 import os
 import sys
 import tempfile
 import textwrap
 import time
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
@@ -121,13 +124,30 @@ def _study(folder: Path, tests, coating, hidden, *, seed: int, stated_noise: boo
     return path
 
 
+@contextlib.contextmanager
+def _progress_log(folder: Path) -> Iterator[None]:
+    """The case's progress messages in ``folder/progress.log`` (not on the shared stderr)."""
+    logger = logging.getLogger("surrogate")
+    handler = logging.FileHandler(folder / "progress.log", mode="w", encoding="utf-8")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(message)s", "%H:%M:%S"))
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        handler.close()
+
+
 def calibration_case(task: tuple[str, Path]) -> dict[str, Any]:
     name, work = task
     truth = CALIBRATIONS[name]
     path = _study(work / f"calibration-{name}", TWO_LENGTHS, truth, None, seed=1, stated_noise=True)
     at_truth = surrogate.compare(path, params=truth, plots=False, progress=False).rmse_n
     start = time.perf_counter()
-    result = surrogate.calibrate(path, progress=False)
+    with _progress_log(path.parent):
+        result = surrogate.calibrate(path, progress=True)
     seconds = time.perf_counter() - start
     (d, mp), (d0, mp0) = coat_section(result.params, 1.2), coat_section(truth, 1.2)
     mf = result.multi_fidelity or {}
@@ -153,7 +173,8 @@ def diagnosis_case(task: tuple[str, Path]) -> dict[str, Any]:
     coating, hidden, tests = DIAGNOSES[name]
     path = _study(work / f"diagnosis-{name}", tests, coating, hidden, seed=2, stated_noise=False)
     start = time.perf_counter()
-    result = surrogate.diagnose(path, jobs=1, progress=False)
+    with _progress_log(path.parent):
+        result = surrogate.diagnose(path, jobs=1, progress=True)
     seconds = time.perf_counter() - start
     top = result.ranking[0] if result.ranking else None
     mf = result.multi_fidelity or {}

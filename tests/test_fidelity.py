@@ -472,10 +472,11 @@ def test_the_probes_run_after_a_corrected_optimum_the_expensive_solver_ran(
 def test_a_promise_is_worth_what_the_corrected_models_proposals_delivered():
     """Once the trust region is below the test's smallest step, the best verified point is
     a local optimum to the expensive solver's resolution where the corrected model's
-    promise, times the largest share of the predicted decrease its proposals within the
-    test's box delivered (from two of them on), is under ``ROUGH_CHI2`` units of χ² — and
-    only then ``converged``; a proposal outside the box, or one the expensive solver
-    failed, is no evidence. The figures are CalculiX's at the *paper* coating."""
+    promise — at a point within the noise level, times the largest share of the
+    predicted decrease its proposals within the test's box delivered (from two of them
+    on) — is under ``ROUGH_CHI2`` units of χ², and only then ``converged``; a proposal
+    outside the box, or one the expensive solver failed, is no evidence. The figures are
+    CalculiX's at the *paper* coating (RMSE 0.0453 N, noise 0.05 N)."""
     from types import SimpleNamespace
 
     from surrogate.calibration._fidelity import MIN_RADIUS, CorrectedCalibration
@@ -487,7 +488,7 @@ def test_a_promise_is_worth_what_the_corrected_models_proposals_delivered():
     problem.spec = SimpleNamespace(solver="calculix")
     loop = CorrectedCalibration.__new__(CorrectedCalibration)
     loop.progress, loop.label, loop.dropped, loop.problem = False, "rule", None, problem
-    loop.delivered_in_box, loop.radius = [], 1.0
+    loop.delivered_in_box, loop.radius, loop.noise = [], 1.0, 0.05
 
     def propose(before, predicted, step, verified):
         loop._proposal = (before, predicted, step)
@@ -498,8 +499,17 @@ def test_a_promise_is_worth_what_the_corrected_models_proposals_delivered():
     def converged(promise):
         loop.fits, loop.radius = [], MIN_RADIUS / 2
         residual = np.full(n, rmse)
-        test = LocalFit(np.ones(3), np.zeros(3), residual, np.zeros(0), np.zeros(0),
-                        np.zeros(3, int), promise, False, "not at a verified local optimum")
+        test = LocalFit(
+            np.ones(3),
+            np.zeros(3),
+            residual,
+            np.zeros(0),
+            np.zeros(0),
+            np.zeros(3, int),
+            promise,
+            False,
+            "not at a verified local optimum",
+        )
         assert loop._resolved(test)  # below the smallest step: no more proposals either way
         return bool(loop.fits) and loop.fits[0].converged
 
@@ -514,8 +524,14 @@ def test_a_promise_is_worth_what_the_corrected_models_proposals_delivered():
     propose(0.045344, 0.044746, 0.0013, 0.04534)  # delivered 0.7 %
     assert loop.delivered_in_box == pytest.approx([-5.15, 0.0958, 0.0067], abs=0.005)
     assert converged(0.039)  # 3.9 % promised, worth 0.37 %: under 2 units of χ²
-    assert "delivered at most 9.6 % of the decrease they predicted" in loop.fits[0].message
+    assert "delivered at most 9.6 % of the decrease they predicted: worth ≤ 0.37 %" in (
+        loop.fits[0].message
+    )
     assert not converged(0.09)  # worth 0.86 %: more than the solver's resolution explains
+    loop.delivered_in_box = [-5.15, -330.0]  # every proposal within the box verified worse
+    assert converged(0.024) and "worth nothing" in loop.fits[0].message
+    loop.noise = 0.04  # a misfit above the noise: the bare promise decides
+    assert not converged(0.024) and converged(0.5 * tolerance)
     loop.radius = 2 * MIN_RADIUS  # the region has not shrunk: the test decides, not this rule
     assert not loop._resolved(SimpleNamespace(predicted_gain=0.0))
 

@@ -360,10 +360,12 @@ class CorrectedCalibration(CalibrationLoop):
         resolution where what the corrected model promises there is worth under
         ``ROUGH_CHI2`` units of χ² — the rule of the local phase's first-order test, whose
         full-solver steps are here the expensive solver's verifications of the shrinking
-        proposals. A promise is worth what the model has delivered: where at least
-        ``DELIVERY_EVIDENCE`` proposals within the test's box were verified, the promise
-        times the largest share of its predicted decrease any of them delivered
-        (``delivered_in_box``, the ratios of :meth:`_manage_radius`).
+        proposals. At a point whose RMSE is within the noise level, a promise is worth
+        what the model has delivered: where at least ``DELIVERY_EVIDENCE`` proposals
+        within the test's box were verified, the promise times the largest share of its
+        predicted decrease any of them delivered (``delivered_in_box``, the ratios of
+        :meth:`_manage_radius`). Not above the noise: a misfit there leaves the model's
+        errors and a real gain alike, and the expensive solver's own local phase decides.
 
         CalculiX's curves change by a few per cent with its increments where the coat
         yields, so at the noise floor the corrected model kept promising 3–9 % lower RMSE
@@ -377,22 +379,29 @@ class CorrectedCalibration(CalibrationLoop):
         n, p = self.problem.n_points, len(self.problem.space.names)
         promise, tolerance = test.predicted_gain, gain_tolerance(n, p, ROUGH_CHI2)
         delivered = self.delivered_in_box
-        share = max(max(delivered), 0.0) if len(delivered) >= DELIVERY_EVIDENCE else 1.0
+        evidence = len(delivered) >= DELIVERY_EVIDENCE and test.rmse <= self.noise
+        share = max(max(delivered), 0.0) if evidence else 1.0
         if promise is None or promise * share > tolerance:
             self._say("the trust region shrank below the test's smallest step: no verified gain")
             return True
-        worth = (
-            ""
-            if promise <= tolerance
-            else f"; its {len(delivered)} proposals within that box delivered at most "
-            f"{100 * share:.2g} % of the decrease they predicted: worth ≤ {100 * promise * share:.2g} %"
-        )
+        worth = ""
+        if promise > tolerance and share <= 0.0:
+            worth = (
+                f"; none of its {len(delivered)} proposals within that box verified any of the "
+                f"decrease they predicted: worth nothing"
+            )
+        elif promise > tolerance:
+            worth = (
+                f"; its {len(delivered)} proposals within that box delivered at most "
+                f"{100 * share:.2g} % of the decrease they predicted: worth ≤ "
+                f"{100 * promise * share:.2g} %"
+            )
         message = (
             f"local optimum to the expensive solver's resolution: the corrected model promises "
             f"{100 * promise:.2g} % lower RMSE within ±{100 * FIRST_ORDER_BOX:g} % of each range"
-            f"{worth} (under {ROUGH_CHI2:g} units of χ²), and none of its proposals down to "
-            f"±{self.radius:.2g} of the fit coordinates verified the decrease it predicted — at "
-            f"a point {self.problem.spec.solver} verified"
+            f"{worth} (under {ROUGH_CHI2:g} units of χ²), and its trust region has shrunk to "
+            f"±{self.radius:.2g} of the fit coordinates (a proposal verified less than a quarter "
+            f"of the decrease it predicted) — at a point {self.problem.spec.solver} verified"
         )
         self.fits = [f for f in self.fits if not np.array_equal(f.theta, test.theta)]
         self.fits.append(replace(test, converged=True, message=message))
