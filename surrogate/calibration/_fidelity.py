@@ -12,12 +12,16 @@ The scheme's rules are :mod:`surrogate.solvers._fidelity`'s. Here:
 - :class:`CorrectedCalibration` — the loop: (1) the corrected model calibrated as a
   built-in study is (global phase, local phase, other basins: built-in runs only);
   (2) its optimum verified by the expensive solver at every condition group — the runs
-  teach the correction; (3) the first-order test of the corrected model *at that
-  verified point*: ``converged`` when it holds; else the local phase on the corrected
-  model from there, and (2) again. Where the correction is too large or too irregular
-  it is dropped, and the expensive solver's own local phase finishes from the best
-  verified point; where the expensive solver could run none of the first points, its
-  own calibration (today's loop) spends what is left of the budget.
+  teach the correction; (3) the first-order test of the corrected model *at the best
+  verified point*: ``converged`` when it holds; else the corrected model's best point
+  within a trust region around it, and (2) again. Where a proposal within the test's
+  box does not deliver the decrease it promised, the corrected model's first-order
+  information is not the expensive solver's at that scale: the expensive solver's own
+  first-order test decides at the best verified point (its Jacobian, its Gauss–Newton
+  step). Where the correction is too large or too irregular it is dropped, and the
+  expensive solver's own local phase finishes from the best verified point; where the
+  expensive solver could run none of the first points, its own calibration (today's
+  loop) spends what is left of the budget.
 """
 
 from __future__ import annotations
@@ -38,13 +42,11 @@ from ..solvers._fidelity import (
     low_fidelity_inputs,
 )
 from ._local import (
-    BACKTRACK,
     FIRST_ORDER_BOX,
-    ROUGH_CHI2,
+    FitCoordinates,
     LocalFit,
     ResidualModel,
     SolverFailed,
-    gain_tolerance,
     local_fit,
     optimum_test,
 )
@@ -62,13 +64,10 @@ __all__ = ["CorrectedCalibration", "CorrectedRuns", "CurveCorrection"]
 CURVE_PRIOR_SD = 0.05  # asinh scale ≈ log F: before any expensive run, ~5 % apart
 CURVE_NOISE_SD = 1e-3  # the expensive curve's own scatter (mesh, increments): ~0.1 %
 LOW_FIDELITY_BUDGET = 1000  # built-in runs of the first, built-in-only calibration
-PROBE_STEP = 0.25  # the probes: a quarter of a range either way, least determined direction
-# (then half or twice that where the expensive solver cannot run the first: ``_probes``)
+PROBE_STEP = 0.25  # the probes: a quarter of a range either way (``_probes``)
 # the trust region of the corrected model's proposals (Alexandrov, Dennis, Lewis & Torczon
 # 1998: a model managed by the ratio of the verified to the predicted decrease)
 SHRINK_BELOW, EXPAND_ABOVE = 0.25, 0.75  # ratios: a quarter of the step / twice the radius
-MIN_RADIUS = FIRST_ORDER_BOX / BACKTRACK[-1]  # the smallest step the first-order test tries
-DELIVERY_EVIDENCE = 2  # verified proposals within the test's box before a promise is discounted
 
 
 class CurveCorrection:
@@ -174,7 +173,7 @@ class CorrectedCalibration(CalibrationLoop):
         self.single_fidelity = False  # whether today's whole loop ran on the expensive solver
         self.radius = 1.0  # the trust region of the proposals, in fit coordinates
         self._proposal: tuple[float, float, float] | None = None  # best, predicted RMSE, step
-        self.delivered_in_box: list[float] = []  # the ratios of the proposals within the box
+        self.stalled: str | None = None  # why the corrected model's proposals stopped
 
     # -- the runs -------------------------------------------------------------------------------
     def corrected_runs(self, correction: CurveCorrection | None) -> CorrectedRuns:
@@ -213,12 +212,15 @@ class CorrectedCalibration(CalibrationLoop):
             if theta is None:
                 break
             self._manage_radius(self._teach(theta))  # a failed run: a smaller region
+            if self.stalled is not None:
+                break
         if self.dropped is not None:
             self._fall_back()
             return
         self._tested_best()
         if not self._converged_at_best():
-            self._fall_back("the corrected model's loop ended short of a verified local optimum")
+            short = "the corrected model's loop ended short of a verified local optimum"
+            self._fall_back(self.stalled or short, near=True)
 
     def _corrected_optimum(
         self, surrogate_trials: int
@@ -246,28 +248,38 @@ class CorrectedCalibration(CalibrationLoop):
 
     def _probes(self, fit: LocalFit, ran: bool) -> list[list[np.ndarray]]:
         """Where the expensive solver first teaches the correction, besides the built-in
-        optimum: both ends of a ``PROBE_STEP`` of each range along the direction the
-        built-in model's curves determine least — where it leaves a parameter free —
-        each with a second point for where the expensive solver cannot run the first
-        (ccx at 85° at a CalculiX mid coating's probes): half as far where it ran the
-        optimum (``ran``), twice as far where it could not (the optimum lies in the
-        region it fails in: a thick coat in the built-in valley, seen with a test solver
-        failing above the truth's Tcoat). Only for a correction that has learned nothing
-        yet (a diagnosis's later calibrations share the current model's).
+        optimum — each side a point and a second one for where the expensive solver
+        cannot run the first:
 
-        Along that direction the built-in curves hardly change (a thin coat's Tcoat at
-        fixed D and Mp), so the search cannot tell its points apart until ``δ`` has seen
-        how the expensive solver does there (CalculiX's coarse mesh: a 20 % thicker coat
-        at the same D and Mp moved the RMSE from 0.044 to 0.19 N, the built-in curves
-        by 0.013 N); a correction learned at one point would be flat along it.
+        - where it ran the optimum (``ran``) and the built-in curves leave a parameter
+          free: both ends of a ``PROBE_STEP`` of each range along the direction they
+          determine least, then half as far (ccx stopped at 85° at a CalculiX mid
+          coating's probes). Along it the built-in curves hardly change (a thin coat's
+          Tcoat at fixed D and Mp), so the search cannot tell its points apart until
+          ``δ`` has seen how the expensive solver does there (CalculiX's coarse mesh: a
+          20 % thicker coat at the same D and Mp moved the RMSE from 0.044 to 0.19 N,
+          the built-in curves by 0.013 N); a correction learned at one point would be
+          flat along it;
+        - where it could not run the optimum, the optimum lies in a region it fails in
+          (ccx stops short for thick coats): thinner, then thicker coats of the same D
+          and Mp — the valley of the fit coordinates, whatever the determination says
+          (its verdict sits on a threshold: a mid coat's Tcoat was free on one BLAS and
+          determined on another, and an Ecoat held at its bound turned its least
+          determined direction off the valley) — ``PROBE_STEP`` of Tcoat's range, then
+          twice as far.
+
+        Only for a correction that has learned nothing yet (a diagnosis's later
+        calibrations share the current model's).
         """
+        if not ran:
+            return self._valley_probes(fit)
         determination = determination_at(self.problem, fit)
         if not determination.free:
             return []
         probes = [
             [
                 point
-                for step in (PROBE_STEP, PROBE_STEP / 2 if ran else 2 * PROBE_STEP)
+                for step in (PROBE_STEP, PROBE_STEP / 2)
                 for point in along_least_determined(
                     self.problem, fit, determination, step, signs=(sign,)
                 )
@@ -281,6 +293,30 @@ class CorrectedCalibration(CalibrationLoop):
             f"the built-in curves leave {', '.join(determination.free)} free: the expensive "
             f"solver first runs at {len(probes)} point(s) along the direction they determine "
             f"least ({direction}) too"
+        )
+        return probes
+
+    def _valley_probes(self, fit: LocalFit) -> list[list[np.ndarray]]:
+        """Thinner, then thicker coats than ``fit`` at its D and Mp (:meth:`_probes`)."""
+        coordinates = FitCoordinates(self.problem.space, self.problem.spec.rig.thickness_mm)
+        if not coordinates.coating:
+            return []
+        probes = []
+        for sign in (-1.0, 1.0):
+            tries = []
+            for step in (PROBE_STEP, 2 * PROBE_STEP):
+                x = coordinates.from_unit(fit.unit)
+                x[coordinates.it] = np.clip(x[coordinates.it] + sign * step, 0.0, 1.0)
+                unit = coordinates.to_unit(x)
+                if np.max(np.abs(unit - fit.unit)) > FIRST_ORDER_BOX:
+                    tries.append(
+                        self.problem.space.clip(self.problem.space.from_unit(unit[None])[0])
+                    )
+            if tries:
+                probes.append(tries)
+        self._say(
+            "the expensive solver could not run the built-in model's optimum: it first runs "
+            f"at {len(probes)} point(s) of the same D and Mp, a thinner and a thicker coat"
         )
         return probes
 
@@ -305,16 +341,14 @@ class CorrectedCalibration(CalibrationLoop):
     def _next(self) -> np.ndarray | None:
         """The first-order test of the corrected model at the best verified point; where it
         fails, the corrected model's best point within the trust region around it — None
-        when the test holds, when the region has shrunk below ``MIN_RADIUS`` (converged to
-        the expensive solver's resolution where the promise is small, see
-        :meth:`_resolved`), when the built-in solver fails, or when the proposal is a point
-        already verified (nothing left for the corrected model to teach)."""
+        when the test holds, when the built-in solver fails, or when the proposal is a
+        point already verified (nothing left for the corrected model to teach)."""
         best = self.best()
         assert best is not None
         model = ResidualModel(self.problem, self.corrected_runs(self.correction))
         try:
             test = self._test(model, best)
-            if test.converged or self._resolved(test):
+            if test.converged:
                 return None
             fit = local_fit(model, best.theta, radius=self.radius)
             at_best = float(np.sqrt(np.mean(model.residual(model.pin(best.theta)) ** 2)))
@@ -335,7 +369,13 @@ class CorrectedCalibration(CalibrationLoop):
     def _manage_radius(self, taught: bool) -> None:
         """The trust region after a proposal was verified: ``ρ`` = the verified decrease of
         the RMSE over the decrease the corrected model predicted (−∞ where the
-        expensive solver failed there). ``ρ < SHRINK_BELOW``: a quarter of the step;
+        expensive solver failed there). ``ρ < SHRINK_BELOW``: a quarter of the step — or,
+        for a step within the first-order test's box, the loop has stalled (``stalled``):
+        at the scale on which the test judges a local optimum, the corrected model's
+        first-order information is not the expensive solver's (CalculiX's curves change
+        shape with Tcoat at fixed D and Mp, and by a few per cent with its increments
+        where the coat yields), and shrinking further would only spend runs on its
+        promises; the expensive solver's own test decides (:meth:`run`).
         ``ρ > EXPAND_ABOVE`` with a step at the region's edge: twice the radius (at most
         the whole range)."""
         if self._proposal is None or self.dropped is not None:
@@ -346,67 +386,18 @@ class CorrectedCalibration(CalibrationLoop):
         if taught:
             verified = self.verified[-1].rmse
             ratio = (before - verified) / max(before - predicted, 1e-12 * before)
-            if step <= FIRST_ORDER_BOX:
-                self.delivered_in_box.append(float(ratio))
+        if ratio < SHRINK_BELOW and step <= FIRST_ORDER_BOX:
+            self.stalled = (
+                f"a proposal within ±{100 * FIRST_ORDER_BOX:g} % of each range verified "
+                f"{ratio:.2g} of the decrease the corrected model predicted (its first-order "
+                "information is not the expensive solver's there)"
+            )
+            return
         if ratio < SHRINK_BELOW:
             self.radius = SHRINK_BELOW * step
         elif ratio > EXPAND_ABOVE and step >= 0.9 * self.radius:
             self.radius = min(1.0, 2.0 * self.radius)
         self._say(f"verified over predicted decrease {ratio:.2g}: trust region ±{self.radius:.3g}")
-
-    def _resolved(self, test: LocalFit) -> bool:
-        """Whether the trust region has shrunk below ``MIN_RADIUS`` (True: stop proposing);
-        then the best verified point is a local optimum to the expensive solver's
-        resolution where what the corrected model promises there is worth under
-        ``ROUGH_CHI2`` units of χ² — the rule of the local phase's first-order test, whose
-        full-solver steps are here the expensive solver's verifications of the shrinking
-        proposals. At a point whose RMSE is within the noise level, a promise is worth
-        what the model has delivered: where at least ``DELIVERY_EVIDENCE`` proposals
-        within the test's box were verified, the promise times the largest share of its
-        predicted decrease any of them delivered (``delivered_in_box``, the ratios of
-        :meth:`_manage_radius`). Not above the noise: a misfit there leaves the model's
-        errors and a real gain alike, and the expensive solver's own local phase decides.
-
-        CalculiX's curves change by a few per cent with its increments where the coat
-        yields, so at the noise floor the corrected model kept promising 3–9 % lower RMSE
-        (up to 14 units of χ²) and its proposals delivered 0.6–9.6 % of what they
-        predicted: under the bare promise the loop handed over to CalculiX's own local
-        phase, which spent the budget — 20 runs — for 0.1 % (*paper*,
-        ``benchmarks/fidelity.py``).
-        """
-        if self.radius >= MIN_RADIUS:
-            return False
-        n, p = self.problem.n_points, len(self.problem.space.names)
-        promise, tolerance = test.predicted_gain, gain_tolerance(n, p, ROUGH_CHI2)
-        delivered = self.delivered_in_box
-        evidence = len(delivered) >= DELIVERY_EVIDENCE and test.rmse <= self.noise
-        share = max(max(delivered), 0.0) if evidence else 1.0
-        if promise is None or promise * share > tolerance:
-            self._say("the trust region shrank below the test's smallest step: no verified gain")
-            return True
-        worth = ""
-        if promise > tolerance and share <= 0.0:
-            worth = (
-                f"; none of its {len(delivered)} proposals within that box verified any of the "
-                f"decrease they predicted: worth nothing"
-            )
-        elif promise > tolerance:
-            worth = (
-                f"; its {len(delivered)} proposals within that box delivered at most "
-                f"{100 * share:.2g} % of the decrease they predicted: worth ≤ "
-                f"{100 * promise * share:.2g} %"
-            )
-        message = (
-            f"local optimum to the expensive solver's resolution: the corrected model promises "
-            f"{100 * promise:.2g} % lower RMSE within ±{100 * FIRST_ORDER_BOX:g} % of each range"
-            f"{worth} (under {ROUGH_CHI2:g} units of χ²), and its trust region has shrunk to "
-            f"±{self.radius:.2g} of the fit coordinates (a proposal verified less than a quarter "
-            f"of the decrease it predicted) — at a point {self.problem.spec.solver} verified"
-        )
-        self.fits = [f for f in self.fits if not np.array_equal(f.theta, test.theta)]
-        self.fits.append(replace(test, converged=True, message=message))
-        self._say(message)
-        return True
 
     def _test(self, model: ResidualModel, point: VerifiedPoint) -> LocalFit:
         """The corrected model's first-order test at a verified point; ``fits`` keeps the
@@ -529,15 +520,18 @@ class CorrectedCalibration(CalibrationLoop):
         self.single_fidelity = True
         CalibrationLoop.run(self, surrogate_trials)
 
-    def _fall_back(self, why: str | None = None) -> None:
-        """The expensive solver's own local phase from the best verified point."""
+    def _fall_back(self, why: str | None = None, *, near: bool = False) -> None:
+        """The expensive solver's own local phase from the best verified point — ``near``
+        (the corrected model led there): its first-order test first, each round a fresh
+        Jacobian and a verified Gauss–Newton step (:func:`~._local.local_fit`)."""
         start = self.best()
         G = len(self.problem.groups)
         if start is None or self.runs.calls + G > self.budget:
             return
         self.fallen_back = why
         self._say(f"{why + ': ' if why else ''}the expensive solver's own local phase takes over")
-        self._local(ResidualModel(self.problem, self.runs, budget=self.budget), start)
+        residuals = ResidualModel(self.problem, self.runs, budget=self.budget)
+        self._local(residuals, start, near=near)
 
     def basin_caveat(self) -> str:
         """What a systematic misfit at a converged point cannot rule out here, and what

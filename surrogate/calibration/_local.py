@@ -320,6 +320,7 @@ def local_fit(
     jacobian_refresh: int = 5,
     rounds: int = _ROUNDS,
     radius: float | None = None,
+    near: bool = False,
 ) -> LocalFit:
     """Bounded trust-region least squares (``scipy.optimize.least_squares``, trf) from ``theta``,
     until the first-order test holds at a verified point.
@@ -334,6 +335,12 @@ def local_fit(
     and returns where ``least_squares`` stops there, untested (one round: a proposal
     of a model, such as the multi-fidelity loop's corrected model, for another solver
     to verify).
+
+    ``near``: ``theta`` is near a local optimum already (the best point a model of the
+    solver led to, verified by it): each round is the first-order test alone — a fresh
+    Jacobian, the Gauss–Newton step within the box, verified by the solver — with no
+    ``least_squares`` run before it, whose own Jacobians and steps would cost as much
+    again before the test could say anything.
     """
     x = model.pin(theta)
     model.fd_step = FD_STEP_UNIT  # a step shrunk in an earlier fit does not carry over
@@ -347,18 +354,19 @@ def local_fit(
             raise SolverFailed(model.runs.failures[-1] if model.runs.failures else "solver failed")
         for _ in range(rounds if radius is None else 1):
             x = np.clip(model.coordinates.canonical(x), low, high)
-            found = least_squares(
-                model.residual,
-                x,
-                jac=_BroydenJacobian(model, jacobian_refresh),
-                bounds=(low, high),
-                method="trf",
-                ftol=ftol,
-                xtol=xtol,
-                gtol=1e-8,  # the first-order test below decides, in RMSE terms
-                max_nfev=max_evaluations,
-            )
-            x, active = model.coordinates.canonical(found.x), found.active_mask
+            if not near:
+                found = least_squares(
+                    model.residual,
+                    x,
+                    jac=_BroydenJacobian(model, jacobian_refresh),
+                    bounds=(low, high),
+                    method="trf",
+                    ftol=ftol,
+                    xtol=xtol,
+                    gtol=1e-8,  # the first-order test below decides, in RMSE terms
+                    max_nfev=max_evaluations,
+                )
+                x, active = model.coordinates.canonical(found.x), found.active_mask
             if radius is not None:
                 active = np.zeros(x.size, dtype=int)  # the region's bounds are not the box's
                 reason = f"the best point within ±{radius:.3g} of the start (fit coordinates)"

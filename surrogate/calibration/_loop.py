@@ -394,10 +394,10 @@ class CalibrationLoop:
         runs = self.runs
         model.fit(np.array(runs.X), np.array(runs.groups), np.array(runs.curves))
 
-    def _local(self, residuals: ResidualModel, start: VerifiedPoint) -> None:
+    def _local(self, residuals: ResidualModel, start: VerifiedPoint, *, near: bool = False) -> None:
         self._say(f"local phase from the verified point at RMSE {start.rmse:.4g} N")
         try:
-            fit = local_fit(residuals, start.theta)
+            fit = local_fit(residuals, start.theta, near=near)
         except (SolverFailed, BudgetSpent) as failed:
             self._say(f"local phase not started: {failed}")
             return

@@ -1,0 +1,68 @@
+"""The local phase (surrogate.calibration._local): its first-order test from a point near
+a local optimum, as the multi-fidelity loop hands over to the expensive solver."""
+
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+import pytest
+
+from surrogate.calibration import _local
+from surrogate.calibration._local import ResidualModel, local_fit
+from surrogate.calibration._loop import SolverRuns
+from surrogate.calibration._problem import CalibrationProblem, load_calibration
+from surrogate.calibration._synthetic import synthetic_measurements
+
+TRUTH = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
+TESTS = [
+    {"test_id": "l10", "bending_length_mm": 10.0},
+    {"test_id": "l15", "bending_length_mm": 15.0},
+]
+
+
+def _problem(folder, seed: int) -> CalibrationProblem:
+    table = synthetic_measurements(TESTS, coating=TRUTH, noise_n=0.05, seed=seed)
+    table.to_csv(folder / "tests.csv", index=False)
+    (folder / "study.toml").write_text(
+        textwrap.dedent(
+            """
+            [study]
+            name = "local"
+            [measurements]
+            file = "tests.csv"
+            noise_n = 0.05
+            """
+        )
+    )
+    spec, data, effects, _ = load_calibration(folder / "study.toml", None, ())
+    return CalibrationProblem(spec, data, effects)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("offset", [0.0, 0.01, -0.02])
+def test_a_fit_started_near_its_optimum_is_tested_first_without_least_squares(
+    tmp_path, monkeypatch, seed, offset
+):
+    """``near``: each round is the first-order test alone (a fresh Jacobian and a verified
+    Gauss–Newton step); from the truth's noisy data, started at the truth or 1–2 % of
+    Ecoat off it, it reaches a point where the test holds in at most three rounds, no
+    worse than the usual fit (``least_squares``, then the test) from the same start by
+    more than the test's resolution (``ROUGH_CHI2`` units of χ²: along the valley of
+    equally good coatings the usual fit may move farther for 0.1 %)."""
+    problem = _problem(tmp_path, seed)
+    start = np.array([TRUTH["ecoat_gpa"] * (1 + offset), TRUTH["scoat_gpa"], TRUTH["tcoat_mm"]])
+
+    def no_least_squares(*args, **kwargs):
+        raise AssertionError("near: no least_squares run")
+
+    usual = local_fit(ResidualModel(problem, SolverRuns(problem, tmp_path / "a", jobs=1)), start)
+    monkeypatch.setattr(_local, "least_squares", no_least_squares)
+    runs = SolverRuns(problem, tmp_path / "b", jobs=1)
+    fit = local_fit(ResidualModel(problem, runs), start, near=True)
+    assert fit.converged, fit.message
+    p, G = len(start), len(problem.groups)
+    rounds = 3  # each: a Jacobian (p·G runs) and at most the four backtracked steps
+    assert runs.calls <= 1 * G + rounds * (p * G + len(_local.BACKTRACK) * G)
+    resolution = _local.gain_tolerance(problem.n_points, p, _local.ROUGH_CHI2)
+    assert fit.rmse <= usual.rmse * (1 + resolution)
