@@ -401,10 +401,10 @@ def test_the_trust_region_follows_the_verified_over_predicted_decrease():
     proposal that verified less than a quarter of its predicted decrease — or that the
     expensive solver could not run — shrinks the region to a quarter of its step; one
     that verified more than three quarters at the region's edge doubles it, up to the
-    whole range; in between, or short of the edge, it stays. A proposal within the
-    first-order test's box (±5 % of each range) that fails so stalls the loop instead:
-    the region is kept and the expensive solver's own test is to decide."""
-    from surrogate.calibration._fidelity import CorrectedCalibration
+    whole range; in between, or short of the edge, it stays. A region shrunk below the
+    first-order test's smallest step stalls the loop: the expensive solver's own test is
+    to decide."""
+    from surrogate.calibration._fidelity import MIN_RADIUS, CorrectedCalibration
     from surrogate.calibration._loop import VerifiedPoint
 
     loop = CorrectedCalibration.__new__(CorrectedCalibration)  # the rule alone, no problem
@@ -422,17 +422,17 @@ def test_the_trust_region_follows_the_verified_over_predicted_decrease():
     assert after(1.0, 0.10, 0.06, 0.2, None) == pytest.approx(0.05)  # failed: ρ = −∞
     assert after(1.0, 0.10, 0.06, 0.2, 0.11) == pytest.approx(0.05)  # worse: ρ < 0
     assert after(1.0, 0.10, 0.06, 0.2, 0.095) == pytest.approx(0.05)  # ρ = 0.125
-    assert loop.stalled is None
     assert after(0.2, 0.10, 0.06, 0.2, 0.09) == pytest.approx(0.2)  # ρ = 0.25 … 0.75: kept
     assert after(0.2, 0.10, 0.06, 0.2, 0.065) == pytest.approx(0.4)  # ρ > 0.75 at the edge
     assert after(0.2, 0.10, 0.06, 0.05, 0.065) == pytest.approx(0.2)  # … inside: kept
     assert after(0.8, 0.10, 0.06, 0.8, 0.06) == pytest.approx(1.0)  # at most the whole range
+    assert after(0.01, 0.10, 0.06, 0.01, 0.11) == pytest.approx(0.0025)  # within the box too
     assert loop.stalled is None
-    # within the box: a stall, whether the proposal verified worse, too little, or failed
-    for verified in (0.11, 0.095, None):
-        assert after(0.04, 0.10, 0.06, 0.04, verified) == pytest.approx(0.04)
-        assert loop.stalled is not None and "within ±5 % of each range" in loop.stalled
-    assert after(0.04, 0.10, 0.06, 0.04, 0.07) == pytest.approx(0.04) and loop.stalled is None
+    # below the test's smallest step (1/64 of ±5 % of a range): stalled, failed or worse
+    for verified in (0.11, None):
+        assert after(0.003, 0.10, 0.06, 0.003, verified) < MIN_RADIUS
+        assert loop.stalled is not None and "smallest step" in loop.stalled
+    assert after(0.003, 0.10, 0.06, 0.003, 0.07) == pytest.approx(0.003) and not loop.stalled
     loop.dropped = "too large"  # a dropped correction: no more proposals, nothing to manage
     assert after(0.8, 0.10, 0.06, 0.8, None) == pytest.approx(0.8)
 
