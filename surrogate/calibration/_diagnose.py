@@ -505,7 +505,7 @@ class _Refits:
         found, loop = run_calibration(
             self.problem.spec,
             effects=(*self.chosen, candidate.effect),
-            progress=False,
+            progress=self.say.on,  # 30 expensive runs: labelled by the model confirmed
             record=False,
             correction=CurveCorrection(self.correction.Z, self.correction.D),
         )
