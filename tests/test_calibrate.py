@@ -5,7 +5,6 @@ the truth is known to the test, never to the calibration.
 """
 
 import json
-import textwrap
 
 import numpy as np
 import optuna
@@ -15,6 +14,7 @@ import surrogate
 from surrogate._cli import main
 from surrogate.calibration._synthetic import synthetic_measurements
 from surrogate.physics import bending_stiffness, plastic_moment
+from tests.studies import write_study
 
 TRUTH = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
 NOISE = 0.05
@@ -25,29 +25,27 @@ def _study(
     tmp_path, tests, *, effects=None, hidden=None, seed=1, name="cal", budget=200, noise=None
 ):
     table = synthetic_measurements(tests, coating=TRUTH, effects=hidden, noise_n=NOISE, seed=seed)
-    table.to_csv(tmp_path / "tests.csv", index=False)
     listed = ", ".join(f'"{e}"' for e in (effects or []))
-    (tmp_path / "study.toml").write_text(
-        textwrap.dedent(
-            f"""
-            [study]
-            name = "{name}"
-            [parameters]
-            ecoat_gpa = {{ low = 0.5,  high = 4.0, log = true }}
-            scoat_gpa = {{ low = 0.05, high = 0.4, log = true }}
-            tcoat_mm  = {{ low = 0.01, high = 0.1, log = true }}
-            [measurements]
-            file = "tests.csv"
-            {"" if noise is None else f"noise_n = {noise}"}
-            [model]
-            effects = [{listed}]
-            [budget]
-            calibration_solver_calls = {budget}
-            surrogate_trials = 100
-            """
-        )
+    return write_study(
+        tmp_path,
+        table,
+        f"""
+        [study]
+        name = "{name}"
+        [parameters]
+        ecoat_gpa = {{ low = 0.5,  high = 4.0, log = true }}
+        scoat_gpa = {{ low = 0.05, high = 0.4, log = true }}
+        tcoat_mm  = {{ low = 0.01, high = 0.1, log = true }}
+        [measurements]
+        file = "tests.csv"
+        {"" if noise is None else f"noise_n = {noise}"}
+        [model]
+        effects = [{listed}]
+        [budget]
+        calibration_solver_calls = {budget}
+        surrogate_trials = 100
+        """,
     )
-    return tmp_path / "study.toml"
 
 
 def _stiffness_and_moment(params):

@@ -5,13 +5,13 @@ The per-effect sweep over every built-in effect is benchmarks/diagnosis.py's job
 """
 
 import json
-import textwrap
 
 import pytest
 
 import surrogate
 from surrogate._cli import main
 from surrogate.calibration._synthetic import synthetic_measurements
+from tests.studies import write_study
 
 pytestmark = pytest.mark.slow  # calibrations and diagnoses: CI runs them, the dev loop not
 
@@ -29,24 +29,22 @@ CANDIDATES = ["tension", "anisotropy", "hardening", "membrane_bending"]
 
 def _study(tmp_path, hidden):
     table = synthetic_measurements(TESTS, coating=TRUTH, effects=hidden, noise_n=NOISE, seed=3)
-    table.to_csv(tmp_path / "tests.csv", index=False)
-    (tmp_path / "study.toml").write_text(
-        textwrap.dedent(
-            """
-            [study]
-            name = "diag"
-            [parameters]
-            ecoat_gpa = { low = 0.5,  high = 4.0, log = true }
-            scoat_gpa = { low = 0.05, high = 0.4, log = true }
-            tcoat_mm  = { low = 0.01, high = 0.1, log = true }
-            [measurements]
-            file = "tests.csv"
-            [budget]
-            surrogate_trials = 100
-            """
-        )
+    return write_study(
+        tmp_path,
+        table,
+        """
+        [study]
+        name = "diag"
+        [parameters]
+        ecoat_gpa = { low = 0.5,  high = 4.0, log = true }
+        scoat_gpa = { low = 0.05, high = 0.4, log = true }
+        tcoat_mm  = { low = 0.01, high = 0.1, log = true }
+        [measurements]
+        file = "tests.csv"
+        [budget]
+        surrogate_trials = 100
+        """,
     )
-    return tmp_path / "study.toml"
 
 
 def test_hidden_tension_is_named_and_adding_it_brings_the_error_to_the_noise(tmp_path):

@@ -9,7 +9,7 @@ tests/solvers/test_calculix_run.py.
 from __future__ import annotations
 
 import json
-import textwrap
+import logging
 import tomllib
 from pathlib import Path
 
@@ -21,6 +21,7 @@ from surrogate.calibration._problem import coat_section
 from surrogate.calibration._synthetic import synthetic_measurements
 from surrogate.study._conditions import CONDITIONS
 from tests.fidelity import LOG_VARIABLE, distortion
+from tests.studies import write_study
 
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 
@@ -163,7 +164,6 @@ def _calibration_study(
     states the noise level where the tests have no replicates)."""
     conditions = [tuple(sorted((k, v) for k, v in t.items() if k in CONDITIONS)) for t in tests]
     replicates = len(set(conditions)) < len(conditions)
-    folder.mkdir(parents=True, exist_ok=True)
     table = synthetic_measurements(
         tests,
         coating=truth,
@@ -173,27 +173,24 @@ def _calibration_study(
         solver="test-distorted",
         solver_settings=dict(tomllib.loads(settings)),
     )
-    table.to_csv(folder / "tests.csv", index=False)
-    path = folder / "study.toml"
-    path.write_text(
-        textwrap.dedent(
-            f"""
-            [study]
-            name = "mf"
-            seed = {seed}
-            [solver]
-            kind = "test-distorted"
-            {settings}
-            [measurements]
-            file = "tests.csv"
-            {"" if replicates else f"noise_n = {noise}"}
-            [budget]
-            surrogate_trials = 100
-            calibration_solver_calls = 30
-            """
-        )
+    return write_study(
+        folder,
+        table,
+        f"""
+        [study]
+        name = "mf"
+        seed = {seed}
+        [solver]
+        kind = "test-distorted"
+        {settings}
+        [measurements]
+        file = "tests.csv"
+        {"" if replicates else f"noise_n = {noise}"}
+        [budget]
+        surrogate_trials = 100
+        calibration_solver_calls = 30
+        """,
     )
-    return path
 
 
 def _truth_rmse(path: Path, truth, settings=None) -> float:
@@ -330,19 +327,25 @@ DIAGNOSIS_TESTS = [
 
 @pytest.mark.slow
 def test_diagnosis_names_a_hidden_effect_confirming_it_on_the_expensive_solver(
-    distorted_solver, log_runs
+    distorted_solver, log_runs, caplog
 ):
     """Hidden tension in curves the expensive solver made: the candidates are refitted on
     the corrected built-in model, the leader is confirmed on the expensive solver (its
-    RMSE after adding it there within 1.3 × noise), membrane_bending — which the solver
-    cannot model — is skipped with its reason, and at most 60 expensive runs are spent."""
+    RMSE after adding it there within 1.3 × noise, its progress shown under its model's
+    name), membrane_bending — which the solver cannot model — is skipped with its reason,
+    and at most 60 expensive runs are spent."""
     truth = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
     hidden = {"tension": {"k_e": 0.006, "k_s": 0.006}}
     path = _calibration_study(log_runs / "diag", DIAGNOSIS_TESTS, truth, hidden=hidden, seed=3)
     data_runs = _expensive_runs(log_runs)
     candidates = ["tension", "anisotropy", "hardening", "membrane_bending"]
-    result = surrogate.diagnose(path, candidates=candidates, progress=False)
+    caplog.set_level(logging.INFO, logger="surrogate")
+    result = surrogate.diagnose(path, candidates=candidates)
     assert result.systematic
+    confirmation = [
+        r.getMessage() for r in caplog.records if "/calibrate/tension]" in r.getMessage()
+    ]
+    assert any("verified" in line for line in confirmation), confirmation[:5]
     leader = result.ranking[0]
     assert leader["effect"] == "tension" and leader["confirmed_by"] == "test-distorted"
     assert leader["delta_bic"] < -10 and leader["rmse_n"] <= 1.3 * result.noise_n

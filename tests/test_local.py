@@ -3,8 +3,6 @@ a local optimum, as the multi-fidelity loop hands over to the expensive solver."
 
 from __future__ import annotations
 
-import textwrap
-
 import numpy as np
 import pytest
 
@@ -13,6 +11,7 @@ from surrogate.calibration._local import ResidualModel, local_fit
 from surrogate.calibration._loop import SolverRuns
 from surrogate.calibration._problem import CalibrationProblem, load_calibration
 from surrogate.calibration._synthetic import synthetic_measurements
+from tests.studies import write_study
 
 TRUTH = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
 TESTS = [
@@ -23,19 +22,18 @@ TESTS = [
 
 def _problem(folder, seed: int) -> CalibrationProblem:
     table = synthetic_measurements(TESTS, coating=TRUTH, noise_n=0.05, seed=seed)
-    table.to_csv(folder / "tests.csv", index=False)
-    (folder / "study.toml").write_text(
-        textwrap.dedent(
-            """
-            [study]
-            name = "local"
-            [measurements]
-            file = "tests.csv"
-            noise_n = 0.05
-            """
-        )
+    path = write_study(
+        folder,
+        table,
+        """
+        [study]
+        name = "local"
+        [measurements]
+        file = "tests.csv"
+        noise_n = 0.05
+        """,
     )
-    spec, data, effects, _ = load_calibration(folder / "study.toml", None, ())
+    spec, data, effects, _ = load_calibration(path, None, ())
     return CalibrationProblem(spec, data, effects)
 
 

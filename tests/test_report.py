@@ -16,7 +16,6 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import textwrap
 from dataclasses import replace
 from pathlib import Path
 
@@ -33,6 +32,7 @@ from surrogate.identify._loop import run
 from surrogate.identify._verify import Verifier, open_verify_study
 from surrogate.study._spec import load_study
 from tests.components import INSTALL, chromium_binary, missing
+from tests.studies import write_study
 
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 
@@ -149,26 +149,22 @@ def calibrated(tmp_path_factory):
         {"test_id": "a1", "tension_n": 0.0, "temperature_c": 21.0},
         {"test_id": "a2", "tension_n": 0.0, "temperature_c": 24.0},
     ]
-    synthetic_measurements(tests, coating=truth, noise_n=0.05, seed=1).to_csv(
-        folder / "tests.csv", index=False
-    )
-    study = folder / "study.toml"
-    study.write_text(
-        textwrap.dedent(
-            """
-            [study]
-            name = "cal"
-            [parameters]
-            ecoat_gpa = { low = 0.5,  high = 4.0, log = true }
-            scoat_gpa = { low = 0.05, high = 0.4, log = true }
-            tcoat_mm  = { low = 0.01, high = 0.1, log = true }
-            [measurements]
-            file = "tests.csv"
-            [budget]
-            calibration_solver_calls = 30
-            surrogate_trials = 50
-            """
-        )
+    study = write_study(
+        folder,
+        synthetic_measurements(tests, coating=truth, noise_n=0.05, seed=1),
+        """
+        [study]
+        name = "cal"
+        [parameters]
+        ecoat_gpa = { low = 0.5,  high = 4.0, log = true }
+        scoat_gpa = { low = 0.05, high = 0.4, log = true }
+        tcoat_mm  = { low = 0.01, high = 0.1, log = true }
+        [measurements]
+        file = "tests.csv"
+        [budget]
+        calibration_solver_calls = 30
+        surrogate_trials = 50
+        """,
     )
     fitted = surrogate.calibrate(study, progress=False)
     assert fitted.status == "converged", fitted.message
