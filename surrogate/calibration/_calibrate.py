@@ -38,6 +38,7 @@ from ._problem import (
     load_calibration,
     model_label,
 )
+from ._statistics import SIGNIFICANCE
 
 __all__ = [
     "CalibrationResult",
@@ -221,7 +222,7 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
     misfit, p_value, determination = None, None, None
     if fit is not None and converged:
         p_value = loop.p_value(fit)
-        misfit = "within the noise" if loop.within_noise(fit) else "systematic"
+        misfit = "within the noise" if p_value >= SIGNIFICANCE else "systematic"
         determination = determination_at(problem, fit).to_json()
     result = CalibrationResult(
         params=dict(zip(problem.space.names, map(float, best.theta), strict=True)),

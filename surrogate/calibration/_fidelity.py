@@ -44,12 +44,10 @@ from ..solvers._fidelity import (
 from ._local import (
     BACKTRACK,
     FIRST_ORDER_BOX,
-    ROUGH_CHI2,
     FitCoordinates,
     LocalFit,
     ResidualModel,
     SolverFailed,
-    gain_tolerance,
     local_fit,
     optimum_test,
 )
@@ -67,7 +65,6 @@ __all__ = ["CorrectedCalibration", "CorrectedRuns", "CurveCorrection"]
 CURVE_PRIOR_SD = 0.05  # asinh scale ≈ log F: before any expensive run, ~5 % apart
 CURVE_NOISE_SD = 1e-3  # the expensive curve's own scatter (mesh, increments): ~0.1 %
 LOW_FIDELITY_BUDGET = 1000  # built-in runs of the first, built-in-only calibration
-SEARCHES_AGAIN = 1  # global searches of the corrected model once the expensive runs taught it
 PROBE_STEP = 0.25  # the probes: a quarter of a range either way (``_probes``)
 # the trust region of the corrected model's proposals (Alexandrov, Dennis, Lewis & Torczon
 # 1998: a model managed by the ratio of the verified to the predicted decrease)
@@ -212,11 +209,12 @@ class CorrectedCalibration(CalibrationLoop):
         if not self.verified:  # nothing verified to go on from
             self._single_fidelity(surrogate_trials)
             return
-        for search in range(1 + SEARCHES_AGAIN):
-            if search and not self._searched_again(surrogate_trials):
+        while self.verified and self.dropped is None and self.runs.calls + G <= self.budget:
+            theta = self._next()
+            if theta is None:
                 break
-            self._trust_region()
-            if self.dropped is not None or self.runs.calls + G > self.budget:
+            self._manage_radius(self._teach(theta))  # a failed run: a smaller region
+            if self.stalled is not None:
                 break
         if self.dropped is not None:
             self._fall_back()
@@ -225,53 +223,6 @@ class CorrectedCalibration(CalibrationLoop):
         if not self._converged_at_best():
             short = "the corrected model's loop ended short of a verified local optimum"
             self._fall_back(self.stalled or short, near=True)
-
-    def _trust_region(self) -> None:
-        """The corrected model's proposals around the best verified point, each verified,
-        until its first-order test holds there, the region stalls or the budget is spent."""
-        G = len(self.problem.groups)
-        while self.verified and self.dropped is None and self.runs.calls + G <= self.budget:
-            theta = self._next()
-            if theta is None:
-                break
-            self._manage_radius(self._teach(theta))  # a failed run: a smaller region
-            if self.stalled is not None:
-                break
-
-    def _searched_again(self, surrogate_trials: int) -> bool:
-        """The corrected model's global search once more, now that the expensive runs have
-        taught the correction (the first ran on the built-in model alone, which may miss a
-        basin of the expensive solver's misfit): its optimum verified where it promises
-        more than ``ROUGH_CHI2`` units of χ² below the best verified RMSE. True where that
-        point verified better — the trust region then starts again from it."""
-        best = self.best()
-        G = len(self.problem.groups)
-        fit = self.best_fit()
-        if best is None or fit is None or (self._converged_at_best() and self.within_noise(fit)):
-            return False  # nothing a basin could improve on
-        if self.runs.calls + G > self.budget:
-            return False
-        found = self._corrected_optimum(surrogate_trials)
-        if found is None:
-            return False
-        theta = found[0]
-        keys = set(self.runs.keys(np.repeat(theta[None, :], G, axis=0), range(G)))
-        predicted = self._predicted(theta)[2]
-        worth = best.rmse * (1.0 - gain_tolerance(self.problem.n_points, len(theta), ROUGH_CHI2))
-        if any(keys == set(v.keys) for v in self.verified) or not predicted < worth:
-            self._say(
-                f"the corrected model searched again: its optimum (predicted RMSE "
-                f"{predicted:.4g} N) is no better than the best verified point's {best.rmse:.4g} N"
-            )
-            return False
-        self._say(
-            f"the corrected model searched again: its optimum predicts RMSE {predicted:.4g} N "
-            f"against the best verified {best.rmse:.4g} N; verifying it"
-        )
-        if not self._teach(theta) or self.best() is best:
-            return False
-        self.radius, self.stalled = 1.0, None
-        return True
 
     def _corrected_optimum(
         self, surrogate_trials: int

@@ -51,7 +51,7 @@ from ._local import (
     local_fit,
 )
 from ._problem import CalibrationProblem, coat_section
-from ._statistics import SIGNIFICANCE, misfit_p_value, noise_dof
+from ._statistics import misfit_p_value, noise_dof
 
 __all__ = [
     "CalibrationLoop",
@@ -309,11 +309,6 @@ class CalibrationLoop:
         rss = float(fit.residual @ fit.residual)
         dof = self.problem.n_points - len(fit.theta)
         return misfit_p_value(rss, dof, self.noise, self.dof_noise)
-
-    def within_noise(self, fit: LocalFit) -> bool:
-        """The misfit verdict at a fit: the noise explains it (:meth:`p_value` at least
-        ``SIGNIFICANCE``), else it is systematic."""
-        return self.p_value(fit) >= SIGNIFICANCE
 
     def _valley_starts(self) -> list[np.ndarray]:
         """Both ends of the least determined direction, when the misfit is near the noise
