@@ -32,10 +32,6 @@ def _study(
         f"""
         [study]
         name = "{name}"
-        [parameters]
-        ecoat_gpa = {{ low = 0.5,  high = 4.0, log = true }}
-        scoat_gpa = {{ low = 0.05, high = 0.4, log = true }}
-        tcoat_mm  = {{ low = 0.01, high = 0.1, log = true }}
         [measurements]
         file = "tests.csv"
         {"" if noise is None else f"noise_n = {noise}"}
@@ -45,6 +41,7 @@ def _study(
         calibration_solver_calls = {budget}
         surrogate_trials = 100
         """,
+        ranges=True,
     )
 
 

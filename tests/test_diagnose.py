@@ -35,15 +35,12 @@ def _study(tmp_path, hidden):
         """
         [study]
         name = "diag"
-        [parameters]
-        ecoat_gpa = { low = 0.5,  high = 4.0, log = true }
-        scoat_gpa = { low = 0.05, high = 0.4, log = true }
-        tcoat_mm  = { low = 0.01, high = 0.1, log = true }
         [measurements]
         file = "tests.csv"
         [budget]
         surrogate_trials = 100
         """,
+        ranges=True,
     )
 
 

@@ -12,7 +12,6 @@ every candidate on the full design.
 
 import json
 import sys
-import textwrap
 
 import numpy as np
 import pandas as pd
@@ -26,6 +25,7 @@ from surrogate.calibration._synthetic import (
     synthetic_measurements,
 )
 from surrogate.effects import _base
+from tests.studies import write_study
 
 pytestmark = pytest.mark.slow  # diagnoses: CI runs them, the dev loop not
 
@@ -35,10 +35,6 @@ DECOYS = ("temperature_c", "humidity_pct")
 STUDY = """
 [study]
 name = "hidden"
-[parameters]
-ecoat_gpa = { low = 0.5,  high = 4.0, log = true }
-scoat_gpa = { low = 0.05, high = 0.4, log = true }
-tcoat_mm  = { low = 0.01, high = 0.1, log = true }
 [budget]
 surrogate_trials = 100  # of the search on the surrogate; 300 by default
 [measurements]
@@ -62,9 +58,7 @@ SAME_LAW = {"hardening", "membrane_bending"}
 
 
 def _write(folder, table, extra=""):
-    table.to_csv(folder / "tests.csv", index=False)
-    (folder / "study.toml").write_text(textwrap.dedent(STUDY) + extra)
-    return folder / "study.toml"
+    return write_study(folder, table, STUDY + extra, ranges=True)
 
 
 @pytest.mark.parametrize("hidden", sorted(HIDDEN))

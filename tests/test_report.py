@@ -155,16 +155,13 @@ def calibrated(tmp_path_factory):
         """
         [study]
         name = "cal"
-        [parameters]
-        ecoat_gpa = { low = 0.5,  high = 4.0, log = true }
-        scoat_gpa = { low = 0.05, high = 0.4, log = true }
-        tcoat_mm  = { low = 0.01, high = 0.1, log = true }
         [measurements]
         file = "tests.csv"
         [budget]
         calibration_solver_calls = 30
         surrogate_trials = 50
         """,
+        ranges=True,
     )
     fitted = surrogate.calibrate(study, progress=False)
     assert fitted.status == "converged", fitted.message

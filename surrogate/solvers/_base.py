@@ -258,8 +258,22 @@ def _program(name: str, cwd: Path, env: Mapping[str, str] | None) -> str | None:
     return shutil.which(name, path={**os.environ, **(env or {})}.get("PATH", os.defpath))
 
 
+def _die_with_parent(caller: int | None = None) -> tuple[str, ...]:
+    """``setpriv --pdeathsig KILL --`` where it works, else nothing; then a shell that
+    runs the program only while its parent is still ``caller`` (this process by
+    default): a caller killed between the fork and ``setpriv``'s ``prctl`` sets no death
+    signal, and its orphan would run to the end (seen once in the suite: ``sleep 300``
+    outlived its SIGKILLed caller). Built at each call: a forked worker is a caller of
+    its own."""
+    deathsig, shell = _deathsig(), shutil.which("sh")
+    if not deathsig or shell is None:
+        return ()
+    alive = f'[ "$PPID" = {os.getpid() if caller is None else caller} ] || exit 137; exec "$@"'
+    return (*deathsig, shell, "-c", alive, "sh")
+
+
 @functools.cache
-def _die_with_parent() -> tuple[str, ...]:
+def _deathsig() -> tuple[str, ...]:
     """``setpriv --pdeathsig KILL --`` where it works (util-linux ≥ 2.33), else nothing."""
     setpriv = shutil.which("setpriv")
     if setpriv is None:

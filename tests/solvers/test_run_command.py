@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from surrogate._errors import SolverError
-from surrogate.solvers._base import run_command
+from surrogate.solvers._base import _die_with_parent, run_command
 
 CALLER = """
 import sys
@@ -48,6 +48,17 @@ def test_a_sigkilled_caller_takes_its_solver_along(tmp_path):
     while any(_alive(pid) for pid in children) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not any(_alive(pid) for pid in children), "the solver outlived its SIGKILLed caller"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux: /proc and pdeathsig")
+def test_a_solver_whose_caller_died_before_its_death_signal_was_set_does_not_start(tmp_path):
+    """The window between the fork and ``setpriv``'s ``prctl``: where the solver's parent
+    is no longer the process that started it, the program does not run."""
+    prefix = _die_with_parent(caller=os.getpid() + 1)  # not the parent of what it starts
+    assert prefix, "setpriv --pdeathsig does not work here"
+    done = subprocess.run([*prefix, "touch", str(tmp_path / "ran")], check=False)
+    assert done.returncode == 137 and not (tmp_path / "ran").exists()
+    assert subprocess.run([*_die_with_parent(), "true"], check=False).returncode == 0
 
 
 def test_a_missing_program_or_a_timeout_is_a_solver_error(tmp_path):
