@@ -74,6 +74,8 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error(f"--repeats must be at least 1 (the base run), got {args.repeats}")
     base = COATS[args.coat]
     coats = [("repeat", 0.0, base)] * args.repeats + [
         (name, eps, {**base, name: base[name] * (1 + eps)}) for name in MOVED for eps in EPSILONS
