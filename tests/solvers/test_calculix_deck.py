@@ -75,6 +75,8 @@ def test_materials_contact_and_step_carry_the_inputs():
     increments = [float(v) for v in blocks["*STATIC"][0].split(",")]
     assert increments[3] == pytest.approx(3.0 / 90.0)  # coarse: at most 3° per increment
     assert "*STEP, NLGEOM, INC=5000" in blocks
+    # ccx's contact defaults but alea (its random part) 0: the same deck, the same curve
+    assert blocks["*CONTROLS, PARAMETERS=CONTACT"] == ["0.001, 0., 100, 60"]
 
 
 def test_hardening_friction_and_end_load_options():
