@@ -22,6 +22,7 @@ import shlex
 import shutil
 import subprocess
 import tempfile
+import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -219,14 +220,23 @@ def work_directory(settings: Mapping[str, Any], *, prefix: str) -> Iterator[Path
             shutil.rmtree(path, ignore_errors=True)
 
 
+WATCH_EVERY_S = 1.0  # how often a run's ``stalled`` check is asked
+
+
 def run_command(
     args: Sequence[str],
     *,
     cwd: Path,
     timeout_s: float,
     env: Mapping[str, str] | None = None,
+    stalled: Callable[[], str | None] | None = None,
 ) -> subprocess.CompletedProcess[str]:
     """Run ``args`` (no shell) in ``cwd``; a timeout or a missing program is a SolverError.
+
+    ``stalled``, asked every ``WATCH_EVERY_S`` while the program runs, says why a run
+    will not finish (from the program's own progress, so the same run stalls on every
+    machine), or None: the program is then killed and the result has return code −9
+    and that reason on a last ``*ERROR`` line of its stdout.
 
     The solver dies with its caller: a timeout, SIGTERM or Ctrl-C kills it here,
     and on Linux a SIGKILLed caller takes it along too (``setpriv --pdeathsig``),
@@ -235,19 +245,50 @@ def run_command(
     program = _program(args[0], cwd, env)
     if program is None:
         raise SolverError(f"{args[0]}: command not found; install it or set its path")
-    try:
-        return subprocess.run(
-            [*_die_with_parent(), program, *args[1:]],
-            cwd=cwd,
-            env={**os.environ, **(env or {})},
-            capture_output=True,
-            text=True,
-            errors="replace",
-            timeout=timeout_s,
-            check=False,
-        )
-    except subprocess.TimeoutExpired:
-        raise SolverError(f"{args[0]} did not finish within {timeout_s:g} s (timeout_s)") from None
+    command = [*_die_with_parent(), program, *args[1:]]
+    with subprocess.Popen(
+        command,
+        cwd=cwd,
+        env={**os.environ, **(env or {})},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        errors="replace",
+    ) as process:
+        try:
+            return _watched(process, command, args[0], timeout_s, stalled)
+        except BaseException:  # a timeout, Ctrl-C, SIGTERM as an exception: no orphan
+            process.kill()
+            process.wait()
+            raise
+
+
+def _watched(
+    process: subprocess.Popen[str],
+    command: list[str],
+    name: str,
+    timeout_s: float,
+    stalled: Callable[[], str | None] | None,
+) -> subprocess.CompletedProcess[str]:
+    """Wait for ``process`` (see :func:`run_command`); ``communicate`` keeps what the
+    program wrote across its own timeouts."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0.0:
+            raise SolverError(f"{name} did not finish within {timeout_s:g} s (timeout_s)")
+        try:
+            stdout, stderr = process.communicate(
+                timeout=left if stalled is None else min(left, WATCH_EVERY_S)
+            )
+        except subprocess.TimeoutExpired:
+            reason = None if stalled is None else stalled()
+            if reason is None:
+                continue
+            process.kill()
+            stdout, stderr = process.communicate()
+            return subprocess.CompletedProcess(command, -9, f"{stdout}\n *ERROR: {reason}\n", stderr)
+        return subprocess.CompletedProcess(command, process.returncode, stdout, stderr)
 
 
 def _program(name: str, cwd: Path, env: Mapping[str, str] | None) -> str | None:

@@ -17,18 +17,26 @@ The deck (after ``shared/calculix.md``, a model that converged to 90°):
 - the probe: a fixed ring of C3D8 elements; surface-to-surface contact with
   the strip's top faces near the probe (linear pressure–overclosure,
   Coulomb friction with a stick slope);
-- one ``*STEP, NLGEOM`` / ``*STATIC`` with automatic increments, RF of the
-  probe nodes and U of the rotation node printed every increment; the history
-  is interpolated to whole degrees;
+- one ``*STEP, NLGEOM`` / ``*STATIC``, RF of the probe nodes and U of the rotation
+  node printed every increment; the history is interpolated to whole degrees;
 - ``*CONTROLS, PARAMETERS=CONTACT`` with ``alea = 0``: ccx's contact iterations
   otherwise have a random part (``alea``, default 0.1), and ccx 2.20 then did not
   repeat itself — the same deck, one thread, took other cutbacks above ~75° where
   the coat yields, curves up to 5.8 % apart (``benchmarks/calculix_scatter.py``);
   with ``alea = 0`` four runs of that deck wrote the same ``.dat`` byte for byte;
-- a run ccx stops short of the angle (its increment cut below the minimum:
-  seen at 73–87° on the coarse mesh for yielding coats at 10 and 15 mm) is run
-  once more with at most ``RETRY_INCREMENT`` of the largest increment; a run
-  that reaches the angle at first is never re-run, so its curve is the deck's.
+- the coarse mesh's increments are fixed (``*STATIC, DIRECT``): with automatic ones
+  a coat 0.1 % thicker took other cutbacks and its curve moved as much as one 1 %
+  thicker (RMS/ε 40 N against 7.4 N), which finite differences and a trust region
+  read as gradient; with fixed increments the curve changes in proportion;
+- a run that does not reach the angle is run again, first with automatic increments
+  (where the fixed ones were used), then with at most ``RETRY_INCREMENT`` of the
+  largest increment: ccx stops short when an increment is cut below the minimum
+  (seen at 73–87° on the coarse mesh for yielding coats at 10 and 15 mm), and with
+  fixed increments its contact iterations can flip between two states for ever
+  (seen for 8 minutes at 40 N end tension): ``MAX_ITERATIONS`` in one attempt of one
+  increment (read off ccx's ``.cvg`` as it runs, so the same run stops on every
+  machine) end the attempt. A run that reaches the angle at first is never re-run,
+  so its curve is the deck's.
 
 Notations: x along the undeformed strip from the clamp edge, y across the
 width, z up through the thickness; the probe axis is parallel to y.
@@ -36,6 +44,7 @@ width, z up through the thickness; the probe axis is parallel to y.
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 from collections.abc import Mapping
@@ -70,11 +79,13 @@ __all__ = [
 ]
 
 SLICE_WIDTH_MM = 0.2
-DECK_VERSION = "ccx-deck-6"
-"""Bump whenever a change to the deck changes results (it keys the cache). 6: contact
-without ccx's random part (``alea = 0``); 5: the retry of a run that stopped short."""
+DECK_VERSION = "ccx-deck-7"
+"""Bump whenever a change to the deck changes results (it keys the cache). 7: fixed
+increments on the coarse mesh; 6: contact without ccx's random part (``alea = 0``)."""
 CONTACT_CONTROLS = "0.001, 0., 100, 60"  # ccx's defaults (delcon, kscalemax, itf2f), alea 0
-RETRY_INCREMENT = 0.5  # the retry's largest increment, of the mesh's
+RETRY_INCREMENT = 0.5  # the last retry's largest increment, of the mesh's
+MAX_ITERATIONS = 200  # in one attempt of one increment: a fixed increment's contact has
+# flipped (automatic increments stop at the deck's 30; fixed ones converged in 3–8)
 JOB = "bending"
 
 
@@ -97,6 +108,9 @@ class CalculixMesh:
         C3D8 elements around the probe's circumference.
     max_increment_deg, initial_increment_deg : float
         Rotation increments of the static step (automatic in between).
+    fixed_increment_deg : float or None
+        The static step's fixed rotation increment (``*STATIC, DIRECT``); None:
+        automatic increments. The retries are automatic.
     """
 
     element_mm: float
@@ -106,11 +120,12 @@ class CalculixMesh:
     probe_segments: int
     max_increment_deg: float
     initial_increment_deg: float
+    fixed_increment_deg: float | None = None
 
 
 CALCULIX_MESHES = {
     "fine": CalculixMesh(0.1, 0.4, 2.0, 1.0, 96, 1.0, 0.5),
-    "coarse": CalculixMesh(0.5, 0.5, 0.0, 2.0, 40, 3.0, 1.5),
+    "coarse": CalculixMesh(0.5, 0.5, 0.0, 2.0, 40, 3.0, 1.5, 1.125),
 }
 
 
@@ -326,9 +341,7 @@ class _Deck:
             # no random part in the contact iterations: the same deck, the same curve
             "*CONTROLS, PARAMETERS=CONTACT",
             CONTACT_CONTROLS,
-            "*STATIC",
-            f"{min(mesh.initial_increment_deg, span) / span:.9g}, 1., 1e-6, "
-            f"{min(mesh.max_increment_deg, span) / span:.9g}",
+            *self._static(span),
             "*BOUNDARY",
             f"{rot}, 2, 2, {-math.radians(span):.12g}",
         ]
@@ -341,6 +354,16 @@ class _Deck:
             "*END STEP",
         ]
         return lines
+
+    def _static(self, span: float) -> list[str]:
+        mesh = self.mesh
+        if mesh.fixed_increment_deg is not None:
+            return ["*STATIC, DIRECT", f"{min(mesh.fixed_increment_deg, span) / span:.9g}, 1."]
+        return [
+            "*STATIC",
+            f"{min(mesh.initial_increment_deg, span) / span:.9g}, 1., 1e-6, "
+            f"{min(mesh.max_increment_deg, span) / span:.9g}",
+        ]
 
     def _end_load(self) -> list[str]:
         """The rig's dead end load along +x, consistent nodal forces on the end face."""
@@ -522,24 +545,14 @@ class CalculixSolver(Solver):
     def _solve(self, inputs: Mapping[str, Any]) -> dict[str, Any]:
         settings = self.check_settings(inputs.get("solver_settings") or {})
         state = model_state(inputs)
-        mesh = CALCULIX_MESHES[settings.get("mesh", "coarse")]
-        first = self._attempt(state, mesh, settings)
-        if first.get("status") != "failed":  # a timeout raises: not retried
-            return first
-        smaller = replace(
-            mesh,
-            max_increment_deg=RETRY_INCREMENT * mesh.max_increment_deg,
-            initial_increment_deg=min(
-                mesh.initial_increment_deg, RETRY_INCREMENT * mesh.max_increment_deg
-            ),
-        )
-        second = self._attempt(state, smaller, settings)
-        if second.get("status") != "failed":
-            return second
-        return failed_result(
-            f"{first['reason']}; again with increments of at most {smaller.max_increment_deg:g}°: "
-            f"{second['reason']}"
-        )
+        reasons = []
+        for attempt in _attempts(CALCULIX_MESHES[settings.get("mesh", "coarse")]):
+            result = self._attempt(state, attempt, settings)
+            if result.get("status") != "failed":  # a timeout raises: not retried
+                return result
+            said = "" if not reasons else f"again with {_increments(attempt)}: "
+            reasons.append(said + result["reason"])
+        return failed_result("; ".join(reasons))
 
     def _attempt(
         self, state: ModelState, mesh: CalculixMesh, settings: Mapping[str, Any]
@@ -554,6 +567,7 @@ class CalculixSolver(Solver):
                 cwd=workdir,
                 timeout_s=float(settings.get("timeout_s", 1800.0)),
                 env={"OMP_NUM_THREADS": threads, "CCX_NPROC_EQUATION_SOLVER": threads},
+                stalled=functools.partial(stalled_increment, workdir / f"{JOB}.cvg"),
             )
             dat = workdir / f"{JOB}.dat"
             text = dat.read_text(encoding="utf-8", errors="replace") if dat.exists() else ""
@@ -566,6 +580,50 @@ class CalculixSolver(Solver):
                 f"{ccx_failure(done.stdout, done.returncode)} (last converged {reached:.2f}°)"
             )
         return _curve(history, state)
+
+
+def _attempts(mesh: CalculixMesh) -> list[CalculixMesh]:
+    """The decks a run tries in turn: the mesh's own, then automatic increments, then
+    automatic ones of at most ``RETRY_INCREMENT`` of the largest."""
+    automatic = replace(mesh, fixed_increment_deg=None)
+    smaller = replace(
+        automatic,
+        max_increment_deg=RETRY_INCREMENT * mesh.max_increment_deg,
+        initial_increment_deg=min(
+            mesh.initial_increment_deg, RETRY_INCREMENT * mesh.max_increment_deg
+        ),
+    )
+    return ([mesh] if mesh.fixed_increment_deg is not None else []) + [automatic, smaller]
+
+
+def _increments(mesh: CalculixMesh) -> str:
+    if mesh.fixed_increment_deg is not None:
+        return f"fixed increments of {mesh.fixed_increment_deg:g}°"
+    return f"automatic increments of at most {mesh.max_increment_deg:g}°"
+
+
+def stalled_increment(cvg: Path) -> str | None:
+    """Why a running ccx will not finish, from its convergence file ``cvg`` (one line an
+    iteration: step, increment, attempt, iteration …): more than ``MAX_ITERATIONS`` in
+    the attempt of the increment it is in. None while it has not."""
+    try:
+        lines = cvg.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return None
+    rows = [line.split()[:3] for line in lines if line.split()[:1] and line.split()[0].isdigit()]
+    if not rows:
+        return None
+    current, count = rows[-1], 0
+    for row in reversed(rows):
+        if row != current:
+            break
+        count += 1
+    if count <= MAX_ITERATIONS:
+        return None
+    return (
+        f"contact did not settle: {count} iterations in increment {current[1]} "
+        f"(attempt {current[2]}), stopped"
+    )
 
 
 def _curve(history: CalculixHistory, state: ModelState) -> dict[str, Any]:

@@ -10,7 +10,14 @@ import pytest
 from surrogate import InputDataError, Rig
 from surrogate.effects import ModelState
 from surrogate.solvers import CALCULIX_MESHES, calculix_deck, parse_calculix_dat
-from surrogate.solvers._calculix import SLICE_WIDTH_MM, _curve, _Deck, ccx_failure
+from surrogate.solvers._calculix import (
+    MAX_ITERATIONS,
+    SLICE_WIDTH_MM,
+    _curve,
+    _Deck,
+    ccx_failure,
+    stalled_increment,
+)
 
 FIXTURES = Path(__file__).parent / "fixtures"
 STATE = ModelState(1000.0, 200.0, 0.012, Rig())
@@ -72,8 +79,14 @@ def test_materials_contact_and_step_carry_the_inputs():
     assert blocks["*SURFACE BEHAVIOR, PRESSURE-OVERCLOSURE=LINEAR"] == ["1000"]
     rotation = [line for line in blocks["*BOUNDARY"] if line.endswith(f"{-math.pi / 2:.12g}")]
     assert len(rotation) == 1  # the clamp's rotation node turns −90° about y
-    increments = [float(v) for v in blocks["*STATIC"][0].split(",")]
-    assert increments[3] == pytest.approx(3.0 / 90.0)  # coarse: at most 3° per increment
+    # coarse: fixed increments of 1.125° (automatic ones moved the curve by more than a
+    # coat 0.1 % thicker does)
+    assert "*STATIC" not in blocks
+    assert [float(v) for v in blocks["*STATIC, DIRECT"][0].split(",")] == pytest.approx(
+        [1.125 / 90.0, 1.0]
+    )
+    fine = _blocks(calculix_deck(STATE, mesh="fine"))
+    assert [float(v) for v in fine["*STATIC"][0].split(",")][3] == pytest.approx(1.0 / 90.0)
     assert "*STEP, NLGEOM, INC=5000" in blocks
     # ccx's contact defaults but alea (its random part) 0: the same deck, the same curve
     assert blocks["*CONTROLS, PARAMETERS=CONTACT"] == ["0.001, 0., 100, 60"]
@@ -139,7 +152,7 @@ def test_ccx_reason_is_its_first_error_line():
 @pytest.mark.parametrize("exit_code", ["201", "0"])
 def test_ccx_stopping_is_a_failed_run_with_its_reason(tmp_path, monkeypatch, exit_code):
     """The run path with a stand-in for ccx (fixtures/fake_ccx.py, NOT CalculiX) that
-    stops after 10 increments with ccx's own message, on the first try and on the retry."""
+    stops after 10 increments with ccx's own message, on the first try and on the retries."""
     import sys
 
     monkeypatch.setenv("FAKE_CCX_EXIT", exit_code)
@@ -154,6 +167,40 @@ def test_ccx_stopping_is_a_failed_run_with_its_reason(tmp_path, monkeypatch, exi
     assert result["status"] == "failed"
     # the 10th block
     stopped = "ccx did not reach 90°: *ERROR: too many cutbacks (last converged 26.25°)"
-    # The stand-in stops the same way when retried with smaller increments: both reasons named.
-    assert result["reason"] == f"{stopped}; again with increments of at most 1.5°: {stopped}"
+    # The stand-in stops the same way when retried: every attempt's reason named.
+    assert result["reason"] == (
+        f"{stopped}; again with automatic increments of at most 3°: {stopped}; "
+        f"again with automatic increments of at most 1.5°: {stopped}"
+    )
     assert list((tmp_path / "work").iterdir()) == []
+
+
+CVG_HEAD = """ SUMMARY OF C0NVERGENCE INFORMATION
+  STEP   INC  ATT   ITER     CONT.   RESID.        CORR.      RESID.      CORR.
+                              EL.    FORCE         DISP       FLUX        TEMP.
+                              (#)     (%)           (%)        (%)         (%)
+"""
+
+
+def _cvg(tmp_path, rows):
+    path = tmp_path / "bending.cvg"
+    body = "".join(
+        f"{1:6d}{inc:6d}{att:6d}{it:7d}{144:9d}  0.3631E+02  0.3759E+02  0.0000E+00  0.0000E+00\n"
+        for it, (inc, att) in enumerate(rows, start=1)
+    )
+    path.write_text(CVG_HEAD + body)
+    return path
+
+
+def test_a_ccx_whose_contact_flips_is_stalled(tmp_path):
+    """ccx's convergence file (the format ccx 2.20 writes): more than MAX_ITERATIONS in
+    one attempt of one increment is a stall, counted from the last line back."""
+    assert stalled_increment(tmp_path / "missing.cvg") is None  # not written yet
+    settled = [(1, 1)] * 8 + [(2, 1)] * 30 + [(2, 2)] * MAX_ITERATIONS
+    assert stalled_increment(_cvg(tmp_path, settled)) is None
+    flipping = [(61, 1)] * 5 + [(62, 1)] * (MAX_ITERATIONS + 1)
+    reason = stalled_increment(_cvg(tmp_path, flipping))
+    assert reason == (
+        f"contact did not settle: {MAX_ITERATIONS + 1} iterations in increment 62 (attempt 1), "
+        "stopped"
+    )

@@ -146,11 +146,11 @@ def test_main_loop_with_calculix_end_to_end(ccx, tmp_path, monkeypatch):
 
 
 FLAKY_CCX = """#!/bin/sh
-# ccx that stops short (as ccx does: an *ERROR line, exit 0) while the deck's largest
-# increment exceeds {limit} of the step, and otherwise is the real ccx
-echo "$(grep -A1 '^\\*STATIC' bending.inp | tail -n 1)" >> {log}
+# ccx that stops short (as ccx does: an *ERROR line, exit 0) for a deck of fixed increments
+# or one whose largest increment exceeds {limit} of the step, and otherwise is the real ccx
+echo "$(grep -A1 '^\\*STATIC' bending.inp | tr '\\n' ' ')" >> {log}
 largest=$(grep -A1 '^\\*STATIC' bending.inp | tail -n 1 | cut -d, -f4)
-if awk -v a="$largest" 'BEGIN {{ exit !(a + 0 > {limit}) }}'; then
+if grep -q '^\\*STATIC, DIRECT' bending.inp || awk -v a="$largest" 'BEGIN {{ exit !(a + 0 > {limit}) }}'; then
   echo " *ERROR: increment size smaller than minimum"
   exit 0
 fi
@@ -166,9 +166,10 @@ def _flaky(tmp_path, ccx, limit):
 
 
 def test_a_run_stopped_short_is_retried_with_smaller_increments(ccx, tmp_path):
-    """ccx stopped short (an increment below the minimum, seen at 73–87° on the coarse
-    mesh) is run once more with half the largest increment; the retry's curve is a
-    real ccx run's. 30° keeps it ~10 s."""
+    """ccx stopped short with the coarse mesh's fixed increments and then with automatic
+    ones (an increment below the minimum, seen at 73–87° on the coarse mesh) is run once
+    more with half the largest increment; the last retry's curve is a real ccx run's.
+    30° keeps it ~10 s."""
     rig = Rig(max_angle_deg=30.0)
     mesh = CALCULIX_MESHES["coarse"]
     largest = mesh.max_increment_deg / rig.max_angle_deg  # 0.1 of the step
@@ -179,18 +180,21 @@ def test_a_run_stopped_short_is_retried_with_smaller_increments(ccx, tmp_path):
     }
     result = solve_inputs(solver_inputs(POINT, rig, solver="calculix", solver_settings=settings))
     assert result["status"] == "ok", result["reason"]
-    decks = (tmp_path / "static.log").read_text().splitlines()
-    assert [float(line.split(",")[3]) for line in decks] == pytest.approx(
+    fixed, automatic, smaller = (tmp_path / "static.log").read_text().splitlines()
+    assert fixed.startswith("*STATIC, DIRECT ")
+    assert float(fixed.split()[2].rstrip(",")) == pytest.approx(mesh.fixed_increment_deg / 30.0)
+    assert [float(line.split(",")[3]) for line in (automatic, smaller)] == pytest.approx(
         [largest, RETRY_INCREMENT * largest]
     )
     assert result["angle_deg"][-1] == 30.0
     assert np.all(np.isfinite(result["force_n"])) and max(result["force_n"]) > 0.0
 
 
-def test_a_run_stopped_short_twice_is_a_failed_run_naming_both(ccx, tmp_path):
+def test_a_run_stopped_short_every_time_is_a_failed_run_naming_each(ccx, tmp_path):
     settings = {"mesh": "coarse", "timeout_s": 900, "command": _flaky(tmp_path, ccx, 0.0)}
     result = solve_inputs(solver_inputs(POINT, Rig(), solver="calculix", solver_settings=settings))
     assert result["status"] == "failed"
-    assert result["reason"].count("increment size smaller than minimum") == 2
-    assert "again with increments of at most 1.5°" in result["reason"]
-    assert len((tmp_path / "static.log").read_text().splitlines()) == 2
+    assert result["reason"].count("increment size smaller than minimum") == 3
+    assert "again with automatic increments of at most 3°" in result["reason"]
+    assert "again with automatic increments of at most 1.5°" in result["reason"]
+    assert len((tmp_path / "static.log").read_text().splitlines()) == 3

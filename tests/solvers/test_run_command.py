@@ -77,3 +77,27 @@ def test_a_program_relative_to_the_work_folder_runs(tmp_path):
     done = run_command(["./solver.sh"], cwd=tmp_path, timeout_s=10)
     assert done.returncode == 0 and done.stdout.strip() == f"solved in {tmp_path}"
     assert os.path.exists(script)
+
+
+def test_a_stalled_program_is_stopped_with_its_reason_and_what_it_wrote(tmp_path):
+    """``stalled`` reads the program's own progress (here: a file it writes) and stops a
+    run that will not finish long before its timeout; the output so far is kept."""
+    script = tmp_path / "solver.sh"
+    script.write_text("#!/bin/sh\necho started\nwhile true; do echo x >> progress; sleep 0.05; done\n")
+    script.chmod(0o755)
+
+    def stalled():
+        progress = tmp_path / "progress"
+        lines = len(progress.read_text().split()) if progress.exists() else 0
+        return f"{lines} lines of progress" if lines >= 5 else None
+
+    start = time.monotonic()
+    done = run_command(["./solver.sh"], cwd=tmp_path, timeout_s=60, stalled=stalled)
+    assert time.monotonic() - start < 30
+    assert done.returncode == -9
+    assert done.stdout.startswith("started\n")
+    assert done.stdout.rstrip().splitlines()[-1].startswith(" *ERROR: ")
+    assert done.stdout.rstrip().endswith("lines of progress")
+    # a program that finishes is never asked about
+    done = run_command(["true"], cwd=tmp_path, timeout_s=10, stalled=lambda: "never")
+    assert done.returncode == 0
