@@ -287,7 +287,8 @@ def _watched(
                 continue
             process.kill()
             stdout, stderr = process.communicate()
-            return subprocess.CompletedProcess(command, -9, f"{stdout}\n *ERROR: {reason}\n", stderr)
+            stdout = f"{stdout}\n *ERROR: {reason}\n"
+            return subprocess.CompletedProcess(command, -9, stdout, stderr)
         return subprocess.CompletedProcess(command, process.returncode, stdout, stderr)
 
 

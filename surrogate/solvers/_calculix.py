@@ -331,7 +331,6 @@ class _Deck:
 
     def _step(self, rot: int) -> list[str]:
         span = self.rig.max_angle_deg
-        mesh = self.mesh
         lines = [
             "*STEP, NLGEOM, INC=5000",
             # more iterations (IC 16 → 30) and cutbacks (IA 5 → 15) per increment than

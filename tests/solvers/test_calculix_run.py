@@ -150,7 +150,8 @@ FLAKY_CCX = """#!/bin/sh
 # or one whose largest increment exceeds {limit} of the step, and otherwise is the real ccx
 echo "$(grep -A1 '^\\*STATIC' bending.inp | tr '\\n' ' ')" >> {log}
 largest=$(grep -A1 '^\\*STATIC' bending.inp | tail -n 1 | cut -d, -f4)
-if grep -q '^\\*STATIC, DIRECT' bending.inp || awk -v a="$largest" 'BEGIN {{ exit !(a + 0 > {limit}) }}'; then
+if grep -q '^\\*STATIC, DIRECT' bending.inp ||
+   awk -v a="$largest" 'BEGIN {{ exit !(a + 0 > {limit}) }}'; then
   echo " *ERROR: increment size smaller than minimum"
   exit 0
 fi

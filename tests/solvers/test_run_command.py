@@ -83,7 +83,9 @@ def test_a_stalled_program_is_stopped_with_its_reason_and_what_it_wrote(tmp_path
     """``stalled`` reads the program's own progress (here: a file it writes) and stops a
     run that will not finish long before its timeout; the output so far is kept."""
     script = tmp_path / "solver.sh"
-    script.write_text("#!/bin/sh\necho started\nwhile true; do echo x >> progress; sleep 0.05; done\n")
+    script.write_text(
+        "#!/bin/sh\necho started\nwhile true; do echo x >> progress; sleep 0.05; done\n"
+    )
     script.chmod(0o755)
 
     def stalled():
