@@ -20,11 +20,12 @@ import functools
 import os
 import shlex
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -223,6 +224,11 @@ def work_directory(settings: Mapping[str, Any], *, prefix: str) -> Iterator[Path
 WATCH_EVERY_S = 1.0  # how often a run's ``stalled`` check is asked
 
 
+class SolverStalled(SolverError):
+    """A run stopped because its own progress said it would not finish
+    (:func:`run_command`'s ``stalled``); the message says why."""
+
+
 def run_command(
     args: Sequence[str],
     *,
@@ -233,14 +239,16 @@ def run_command(
 ) -> subprocess.CompletedProcess[str]:
     """Run ``args`` (no shell) in ``cwd``; a timeout or a missing program is a SolverError.
 
-    ``stalled``, asked every ``WATCH_EVERY_S`` while the program runs, says why a run
-    will not finish (from the program's own progress, so the same run stalls on every
-    machine), or None: the program is then killed and the result has return code −9
-    and that reason on a last ``*ERROR`` line of its stdout.
+    ``stalled`` (it must not raise), asked every ``WATCH_EVERY_S`` while the program
+    runs, says why the run will not finish, or None; where it says why, the program is
+    killed and :class:`SolverStalled` raised with that reason. A rule that reads the
+    program's own progress gives the same verdict on every machine only if the caller
+    asks it once more after the program ended (as the CalculiX adapter does).
 
-    The solver dies with its caller: a timeout, SIGTERM or Ctrl-C kills it here,
-    and on Linux a SIGKILLed caller takes it along too (``setpriv --pdeathsig``),
-    so a killed worker leaves no solver running for nobody.
+    The solver dies with its caller: a timeout, a stall, SIGTERM or Ctrl-C kills its
+    whole process group here (a wrapper script's children too), and on Linux a
+    SIGKILLed caller takes it along too (``setpriv --pdeathsig``), so a killed worker
+    leaves no solver running for nobody.
     """
     program = _program(args[0], cwd, env)
     if program is None:
@@ -254,12 +262,12 @@ def run_command(
         stderr=subprocess.PIPE,
         text=True,
         errors="replace",
+        process_group=0,
     ) as process:
         try:
             return _watched(process, command, args[0], timeout_s, stalled)
-        except BaseException:  # a timeout, Ctrl-C, SIGTERM as an exception: no orphan
-            process.kill()
-            process.wait()
+        except BaseException:  # a timeout, a stall, Ctrl-C, SIGTERM: no orphan
+            _kill(process)
             raise
 
 
@@ -283,13 +291,17 @@ def _watched(
             )
         except subprocess.TimeoutExpired:
             reason = None if stalled is None else stalled()
-            if reason is None:
-                continue
-            process.kill()
-            stdout, stderr = process.communicate()
-            stdout = f"{stdout}\n *ERROR: {reason}\n"
-            return subprocess.CompletedProcess(command, -9, stdout, stderr)
+            if reason is not None and process.poll() is None:
+                raise SolverStalled(reason) from None
+            continue
         return subprocess.CompletedProcess(command, process.returncode, stdout, stderr)
+
+
+def _kill(process: subprocess.Popen[str]) -> None:
+    """SIGKILL ``process``'s group (it leads its own) and reap it."""
+    with suppress(ProcessLookupError, PermissionError):
+        os.killpg(process.pid, signal.SIGKILL)
+    process.wait()
 
 
 def _program(name: str, cwd: Path, env: Mapping[str, str] | None) -> str | None:

@@ -33,10 +33,11 @@ The deck (after ``shared/calculix.md``, a model that converged to 90°):
   largest increment: ccx stops short when an increment is cut below the minimum
   (seen at 73–87° on the coarse mesh for yielding coats at 10 and 15 mm), and with
   fixed increments its contact iterations can flip between two states for ever
-  (seen for 8 minutes at 40 N end tension): ``MAX_ITERATIONS`` in one attempt of one
-  increment (read off ccx's ``.cvg`` as it runs, so the same run stops on every
-  machine) end the attempt. A run that reaches the angle at first is never re-run,
-  so its curve is the deck's.
+  (seen for 8 minutes at 40 N end tension): more than ``MAX_ITERATIONS`` in one
+  attempt of one increment end the attempt (:func:`stalled_increment`, read off ccx's
+  ``.cvg`` as it runs and once more at its end, so the same run stops on every
+  machine). A run that reaches the angle at first is never re-run,
+  so its curve is the deck's; the result's ``increments`` says which attempt's it is.
 
 Notations: x along the undeformed strip from the clamp edge, y across the
 width, z up through the thickness; the probe axis is parallel to y.
@@ -58,6 +59,7 @@ from .._errors import InputDataError, SolverError
 from ..effects import ModelState
 from ._base import (
     Solver,
+    SolverStalled,
     beyond_the_coat,
     check_common_settings,
     command_list,
@@ -79,9 +81,10 @@ __all__ = [
 ]
 
 SLICE_WIDTH_MM = 0.2
-DECK_VERSION = "ccx-deck-7"
-"""Bump whenever a change to the deck changes results (it keys the cache). 7: fixed
-increments on the coarse mesh; 6: contact without ccx's random part (``alea = 0``)."""
+DECK_VERSION = "ccx-deck-8"
+"""Bump whenever a change to the deck changes results (it keys the cache). 8: a stall
+judged on the whole ``.cvg``; 7: fixed increments on the coarse mesh; 6: contact
+without ccx's random part (``alea = 0``)."""
 CONTACT_CONTROLS = "0.001, 0., 100, 60"  # ccx's defaults (delcon, kscalemax, itf2f), alea 0
 RETRY_INCREMENT = 0.5  # the last retry's largest increment, of the mesh's
 MAX_ITERATIONS = 200  # in one attempt of one increment: a fixed increment's contact has
@@ -548,9 +551,9 @@ class CalculixSolver(Solver):
         for attempt in _attempts(CALCULIX_MESHES[settings.get("mesh", "coarse")]):
             result = self._attempt(state, attempt, settings)
             if result.get("status") != "failed":  # a timeout raises: not retried
-                return result
-            said = "" if not reasons else f"again with {_increments(attempt)}: "
-            reasons.append(said + result["reason"])
+                return {**result, "increments": _increments(attempt)}
+            said = "with" if not reasons else "again with"
+            reasons.append(f"{said} {_increments(attempt)}: {result['reason']}")
         return failed_result("; ".join(reasons))
 
     def _attempt(
@@ -561,23 +564,31 @@ class CalculixSolver(Solver):
         threads = str(int(settings.get("threads", 1)))
         with work_directory(settings, prefix="ccx-") as workdir:
             (workdir / f"{JOB}.inp").write_text(deck, encoding="utf-8")
-            done = run_command(
-                [*command_list(settings.get("command", "ccx")), "-i", JOB],
-                cwd=workdir,
-                timeout_s=float(settings.get("timeout_s", 1800.0)),
-                env={"OMP_NUM_THREADS": threads, "CCX_NPROC_EQUATION_SOLVER": threads},
-                stalled=functools.partial(stalled_increment, workdir / f"{JOB}.cvg"),
-            )
+            convergence = functools.partial(stalled_increment, workdir / f"{JOB}.cvg")
+            try:
+                done = run_command(
+                    [*command_list(settings.get("command", "ccx")), "-i", JOB],
+                    cwd=workdir,
+                    timeout_s=float(settings.get("timeout_s", 1800.0)),
+                    env={"OMP_NUM_THREADS": threads, "CCX_NPROC_EQUATION_SOLVER": threads},
+                    stalled=convergence,
+                )
+                # the rule once more at the end: whether ccx finished between two looks
+                # or not, the same .cvg gives the same verdict
+                why = convergence()
+                if why is None and (done.returncode != 0 or "*ERROR" in done.stdout.upper()):
+                    why = (
+                        f"ccx did not reach {state.rig.max_angle_deg:g}°: "
+                        f"{ccx_failure(done.stdout, done.returncode)}"
+                    )
+            except SolverStalled as stalled:
+                why = str(stalled)
             dat = workdir / f"{JOB}.dat"
             text = dat.read_text(encoding="utf-8", errors="replace") if dat.exists() else ""
         history = parse_calculix_dat(text)
-        failed = done.returncode != 0 or "*ERROR" in done.stdout.upper()
-        if failed:
+        if why is not None:
             reached = -math.degrees(history.rotation_rad[-1]) if history.time.size else 0.0
-            return failed_result(
-                f"ccx did not reach {state.rig.max_angle_deg:g}°: "
-                f"{ccx_failure(done.stdout, done.returncode)} (last converged {reached:.2f}°)"
-            )
+            return failed_result(f"{why} (last converged {reached:.2f}°)")
         return _curve(history, state)
 
 
@@ -602,27 +613,27 @@ def _increments(mesh: CalculixMesh) -> str:
 
 
 def stalled_increment(cvg: Path) -> str | None:
-    """Why a running ccx will not finish, from its convergence file ``cvg`` (one line an
-    iteration: step, increment, attempt, iteration …): more than ``MAX_ITERATIONS`` in
-    the attempt of the increment it is in. None while it has not."""
+    """Why a ccx run will not finish or is not to be trusted, from its convergence file
+    ``cvg`` (one line an iteration: step, increment, attempt, iteration …): more than
+    ``MAX_ITERATIONS`` in one attempt of one increment, anywhere in the file — a rule of
+    the file alone, so a run stopped while it ran and one that finished between two
+    looks get the same verdict. None otherwise."""
     try:
         lines = cvg.read_text(encoding="utf-8", errors="replace").splitlines()
     except OSError:
         return None
-    rows = [line.split()[:3] for line in lines if line.split()[:1] and line.split()[0].isdigit()]
-    if not rows:
-        return None
-    current, count = rows[-1], 0
-    for row in reversed(rows):
-        if row != current:
-            break
-        count += 1
-    if count <= MAX_ITERATIONS:
-        return None
-    return (
-        f"contact did not settle: {count} iterations in increment {current[1]} "
-        f"(attempt {current[2]}), stopped"
-    )
+    counts: dict[tuple[str, ...], int] = {}
+    for line in lines:
+        fields = line.split()
+        if len(fields) >= 5 and fields[0].isdigit():  # a half-written last line waits
+            counts[tuple(fields[:3])] = counts.get(tuple(fields[:3]), 0) + 1
+    for (_, increment, attempt), count in counts.items():
+        if count > MAX_ITERATIONS:
+            return (
+                f"ccx's contact did not settle: more than {MAX_ITERATIONS} iterations in "
+                f"increment {increment} (attempt {attempt})"
+            )
+    return None
 
 
 def _curve(history: CalculixHistory, state: ModelState) -> dict[str, Any]:

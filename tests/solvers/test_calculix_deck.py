@@ -169,7 +169,8 @@ def test_ccx_stopping_is_a_failed_run_with_its_reason(tmp_path, monkeypatch, exi
     stopped = "ccx did not reach 90°: *ERROR: too many cutbacks (last converged 26.25°)"
     # The stand-in stops the same way when retried: every attempt's reason named.
     assert result["reason"] == (
-        f"{stopped}; again with automatic increments of at most 3°: {stopped}; "
+        f"with fixed increments of 1.125°: {stopped}; "
+        f"again with automatic increments of at most 3°: {stopped}; "
         f"again with automatic increments of at most 1.5°: {stopped}"
     )
     assert list((tmp_path / "work").iterdir()) == []
@@ -193,14 +194,58 @@ def _cvg(tmp_path, rows):
 
 
 def test_a_ccx_whose_contact_flips_is_stalled(tmp_path):
-    """ccx's convergence file (the format ccx 2.20 writes): more than MAX_ITERATIONS in
-    one attempt of one increment is a stall, counted from the last line back."""
+    """ccx's convergence file (its columns as ccx 2.20 writes them): more than
+    MAX_ITERATIONS in one attempt of one increment anywhere in it is a stall."""
     assert stalled_increment(tmp_path / "missing.cvg") is None  # not written yet
     settled = [(1, 1)] * 8 + [(2, 1)] * 30 + [(2, 2)] * MAX_ITERATIONS
     assert stalled_increment(_cvg(tmp_path, settled)) is None
+    stalled = f"ccx's contact did not settle: more than {MAX_ITERATIONS} iterations in "
     flipping = [(61, 1)] * 5 + [(62, 1)] * (MAX_ITERATIONS + 1)
-    reason = stalled_increment(_cvg(tmp_path, flipping))
-    assert reason == (
-        f"contact did not settle: {MAX_ITERATIONS + 1} iterations in increment 62 (attempt 1), "
-        "stopped"
+    assert stalled_increment(_cvg(tmp_path, flipping)) == stalled + "increment 62 (attempt 1)"
+    # the same verdict after ccx settled and went on: a rule of the file, not of the moment
+    settled_late = flipping + [(63, 1)] * 4
+    assert stalled_increment(_cvg(tmp_path, settled_late)) == stalled + "increment 62 (attempt 1)"
+    (tmp_path / "half.cvg").write_text(CVG_HEAD + "     1     2     1\n")  # half-written
+    assert stalled_increment(tmp_path / "half.cvg") is None
+
+
+FLIPPING_CCX = """import sys, time
+from pathlib import Path
+head = Path(sys.argv[1]).read_text()
+rows = "".join(f"     1     7     1{{i:7d}}      144  0.3631E+02  0.3759E+02  0.0000E+00\\n"
+               for i in range({rows}))
+Path("bending.cvg").write_text(head + rows)
+time.sleep({sleep})
+"""
+
+
+@pytest.mark.parametrize("sleep", [60, 0])
+def test_a_stalled_ccx_is_retried_and_named(tmp_path, sleep):
+    """A stand-in for ccx (NOT CalculiX) whose .cvg shows an increment that does not
+    settle: stopped while it runs (sleep 60) or judged at its end (sleep 0) — the
+    same verdict — and retried with each deck in turn, every reason named."""
+    import sys
+
+    from surrogate.solvers._batch import solve_inputs, solver_inputs
+
+    script = tmp_path / "flipping_ccx.py"
+    script.write_text(FLIPPING_CCX.format(rows=MAX_ITERATIONS + 1, sleep=sleep))
+    head = tmp_path / "head.cvg"
+    head.write_text(CVG_HEAD)
+    settings = {
+        "command": [sys.executable, str(script), str(head)],
+        "workdir_root": str(tmp_path / "work"),
+        "timeout_s": 120,
+    }
+    point = {"ecoat_gpa": 1.0, "scoat_gpa": 0.2, "tcoat_mm": 0.012}
+    result = solve_inputs(solver_inputs(point, Rig(), solver="calculix", solver_settings=settings))
+    assert result["status"] == "failed"
+    stalled = (
+        f"ccx's contact did not settle: more than {MAX_ITERATIONS} iterations in increment 7 "
+        "(attempt 1) (last converged 0.00°)"
+    )
+    assert result["reason"] == (
+        f"with fixed increments of 1.125°: {stalled}; "
+        f"again with automatic increments of at most 3°: {stalled}; "
+        f"again with automatic increments of at most 1.5°: {stalled}"
     )

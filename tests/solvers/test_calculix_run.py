@@ -44,11 +44,12 @@ def test_coarse_run_agrees_with_the_builtin_solver(ccx, tmp_path):
 
 
 def test_the_same_deck_gives_the_same_curve(ccx, tmp_path):
-    """Where the coat yields, ccx 2.20 with its contact's random part (``alea``, default
-    0.1) took other cutbacks above ~75° when the same deck ran again: curves up to 5.8 %
-    apart (README, "CalculiX"). With ``alea = 0`` two runs of one input agree to the last
+    """Where the coat yields, ccx 2.20 with automatic increments and its contact's random
+    part (``alea``, default 0.1) took other cutbacks above ~75° when the same deck ran
+    again: curves up to 5.8 % apart (README, "CalculiX"); this test failed so. With the
+    deck's fixed increments and ``alea = 0`` two runs of one input agree to the last
     digit. A coat a calibration of the paper curves ran, 10 mm, to 90°, both runs at once
-    (~30 s); the deck without it differed in each of three pairs tried."""
+    (~30 s)."""
     yielding = {
         "ecoat_gpa": 0.5,
         "scoat_gpa": 0.08182017194065078,
@@ -62,6 +63,7 @@ def test_the_same_deck_gives_the_same_curve(ccx, tmp_path):
     assert first["status"] == second["status"] == "ok", (first["reason"], second["reason"])
     assert first["angle_deg"][-1] == 90.0
     assert first["force_n"] == second["force_n"]
+    assert first["increments"] == "fixed increments of 1.125°"
 
 
 def test_timeout_is_a_failed_run(ccx, tmp_path):
@@ -189,6 +191,7 @@ def test_a_run_stopped_short_is_retried_with_smaller_increments(ccx, tmp_path):
     )
     assert result["angle_deg"][-1] == 30.0
     assert np.all(np.isfinite(result["force_n"])) and max(result["force_n"]) > 0.0
+    assert result["increments"] == "automatic increments of at most 1.5°"
 
 
 def test_a_run_stopped_short_every_time_is_a_failed_run_naming_each(ccx, tmp_path):

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from surrogate._errors import SolverError
-from surrogate.solvers._base import _die_with_parent, run_command
+from surrogate.solvers._base import SolverStalled, _die_with_parent, run_command
 
 CALLER = """
 import sys
@@ -79,27 +79,36 @@ def test_a_program_relative_to_the_work_folder_runs(tmp_path):
     assert os.path.exists(script)
 
 
-def test_a_stalled_program_is_stopped_with_its_reason_and_what_it_wrote(tmp_path):
-    """``stalled`` reads the program's own progress (here: a file it writes) and stops a
-    run that will not finish long before its timeout; the output so far is kept."""
+def test_a_stalled_program_is_stopped_with_its_reason_children_and_all(tmp_path):
+    """``stalled`` reads the program's own progress (here: a file its child writes) and
+    stops a run that will not finish long before its timeout; a wrapper script's child
+    dies with it (its progress stops growing)."""
     script = tmp_path / "solver.sh"
-    script.write_text(
-        "#!/bin/sh\necho started\nwhile true; do echo x >> progress; sleep 0.05; done\n"
-    )
+    script.write_text("#!/bin/sh\n(while true; do echo x >> progress; sleep 0.05; done) &\nwait\n")
     script.chmod(0o755)
+    progress = tmp_path / "progress"
 
     def stalled():
-        progress = tmp_path / "progress"
         lines = len(progress.read_text().split()) if progress.exists() else 0
         return f"{lines} lines of progress" if lines >= 5 else None
 
     start = time.monotonic()
-    done = run_command(["./solver.sh"], cwd=tmp_path, timeout_s=60, stalled=stalled)
+    with pytest.raises(SolverStalled, match=r"^\d+ lines of progress$"):
+        run_command(["./solver.sh"], cwd=tmp_path, timeout_s=60, stalled=stalled)
     assert time.monotonic() - start < 30
-    assert done.returncode == -9
-    assert done.stdout.startswith("started\n")
-    assert done.stdout.rstrip().splitlines()[-1].startswith(" *ERROR: ")
-    assert done.stdout.rstrip().endswith("lines of progress")
-    # a program that finishes is never asked about
-    done = run_command(["true"], cwd=tmp_path, timeout_s=10, stalled=lambda: "never")
-    assert done.returncode == 0
+    written = progress.read_text()
+    time.sleep(0.5)
+    assert progress.read_text() == written, "the wrapper's child outlived the stall"
+
+
+def test_a_program_that_finishes_is_not_stalled(tmp_path):
+    asked = []
+
+    def stalled():
+        asked.append(1)
+        return None
+
+    done = run_command(
+        ["sh", "-c", "sleep 1.5; echo done"], cwd=tmp_path, timeout_s=30, stalled=stalled
+    )
+    assert done.returncode == 0 and done.stdout == "done\n" and asked
