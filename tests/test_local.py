@@ -3,6 +3,8 @@ a local optimum, as the multi-fidelity loop hands over to the expensive solver."
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -57,8 +59,16 @@ def test_a_fit_started_near_its_optimum_is_tested_first_without_least_squares(
     usual = local_fit(ResidualModel(problem, SolverRuns(problem, tmp_path / "a", jobs=1)), start)
     monkeypatch.setattr(_local, "least_squares", no_least_squares)
     runs = SolverRuns(problem, tmp_path / "b", jobs=1)
-    fit = local_fit(ResidualModel(problem, runs), start, near=True)
+    said: list[str] = []
+    fit = local_fit(ResidualModel(problem, runs), start, near=True, say=said.append)
     assert fit.converged, fit.message
+    # a line for each round whose test did not hold: where it goes on, the runs so far
+    pattern = r"local phase round (\d+): RMSE [0-9.e+-]+ N after (\d+) solver runs; \S"
+    matches = [re.fullmatch(pattern, line[: line.index("; ") + 3]) for line in said]
+    assert said or offset == 0.0  # off the optimum, the first round goes on from a step
+    assert all(matches), said
+    assert [int(m.group(1)) for m in matches] == list(range(1, len(said) + 1))
+    assert all(int(m.group(2)) <= runs.calls for m in matches)
     p, G = len(start), len(problem.groups)
     rounds = 3  # each: a Jacobian (p·G runs) and at most the four backtracked steps
     assert runs.calls <= 1 * G + rounds * (p * G + len(_local.BACKTRACK) * G)

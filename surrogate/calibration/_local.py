@@ -33,6 +33,7 @@ does deliver, the fit goes on from that better point.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -321,6 +322,7 @@ def local_fit(
     rounds: int = _ROUNDS,
     radius: float | None = None,
     near: bool = False,
+    say: Callable[[str], None] | None = None,
 ) -> LocalFit:
     """Bounded trust-region least squares (``scipy.optimize.least_squares``, trf) from ``theta``,
     until the first-order test holds at a verified point.
@@ -341,6 +343,10 @@ def local_fit(
     Jacobian, the Gauss–Newton step within the box, verified by the solver — with no
     ``least_squares`` run before it, whose own Jacobians and steps would cost as much
     again before the test could say anything.
+
+    ``say``: told after each round whose test did not hold (where the fit goes on, the
+    solver runs so far, why) — progress for a local phase of an expensive solver, whose
+    rounds take minutes.
     """
     x = model.pin(theta)
     model.fd_step = FD_STEP_UNIT  # a step shrunk in an earlier fit does not carry over
@@ -352,7 +358,7 @@ def local_fit(
     try:
         if model.evaluate(x)[1] is None:
             raise SolverFailed(model.runs.failures[-1] if model.runs.failures else "solver failed")
-        for _ in range(rounds if radius is None else 1):
+        for round_ in range(rounds if radius is None else 1):
             x = np.clip(model.coordinates.canonical(x), low, high)
             if not near:
                 found = least_squares(
@@ -376,6 +382,12 @@ def local_fit(
                 return _result(model, x, active, test)
             x, reason = test.better, test.message
             active = np.zeros(x.size, dtype=int)  # least_squares's mask was of another point
+            if say is not None:
+                rmse = float(np.sqrt(np.mean(model.residual(x) ** 2)))
+                say(
+                    f"local phase round {round_ + 1}: RMSE {rmse:.4g} N after "
+                    f"{model.runs.calls} solver runs; {reason}"
+                )
     except BudgetSpent as spent:
         best = model.best_evaluated()
         if best is None:

@@ -397,7 +397,7 @@ class CalibrationLoop:
     def _local(self, residuals: ResidualModel, start: VerifiedPoint, *, near: bool = False) -> None:
         self._say(f"local phase from the verified point at RMSE {start.rmse:.4g} N")
         try:
-            fit = local_fit(residuals, start.theta, near=near)
+            fit = local_fit(residuals, start.theta, near=near, say=self._say)
         except (SolverFailed, BudgetSpent) as failed:
             self._say(f"local phase not started: {failed}")
             return
