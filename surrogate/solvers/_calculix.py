@@ -48,6 +48,7 @@ from __future__ import annotations
 import functools
 import math
 import re
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -622,11 +623,11 @@ def stalled_increment(cvg: Path) -> str | None:
         lines = cvg.read_text(encoding="utf-8", errors="replace").splitlines()
     except OSError:
         return None
-    counts: dict[tuple[str, ...], int] = {}
-    for line in lines:
-        fields = line.split()
-        if len(fields) >= 5 and fields[0].isdigit():  # a half-written last line waits
-            counts[tuple(fields[:3])] = counts.get(tuple(fields[:3]), 0) + 1
+    counts = Counter(  # a half-written last line waits for the next look
+        tuple(fields[:3])
+        for fields in map(str.split, lines)
+        if len(fields) >= 5 and fields[0].isdigit()
+    )
     for (_, increment, attempt), count in counts.items():
         if count > MAX_ITERATIONS:
             return (

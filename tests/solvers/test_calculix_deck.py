@@ -209,31 +209,26 @@ def test_a_ccx_whose_contact_flips_is_stalled(tmp_path):
     assert stalled_increment(tmp_path / "half.cvg") is None
 
 
-FLIPPING_CCX = """import sys, time
-from pathlib import Path
-head = Path(sys.argv[1]).read_text()
-rows = "".join(f"     1     7     1{{i:7d}}      144  0.3631E+02  0.3759E+02  0.0000E+00\\n"
-               for i in range({rows}))
-Path("bending.cvg").write_text(head + rows)
+FLIPPING_CCX = """import shutil, sys, time
+shutil.copy(sys.argv[1], "bending.cvg")
 time.sleep({sleep})
 """
 
 
 @pytest.mark.parametrize("sleep", [60, 0])
 def test_a_stalled_ccx_is_retried_and_named(tmp_path, sleep):
-    """A stand-in for ccx (NOT CalculiX) whose .cvg shows an increment that does not
-    settle: stopped while it runs (sleep 60) or judged at its end (sleep 0) — the
+    """A stand-in for ccx (NOT CalculiX) that writes a .cvg with an increment that does
+    not settle: stopped while it runs (sleep 60) or judged at its end (sleep 0) — the
     same verdict — and retried with each deck in turn, every reason named."""
     import sys
 
     from surrogate.solvers._batch import solve_inputs, solver_inputs
 
     script = tmp_path / "flipping_ccx.py"
-    script.write_text(FLIPPING_CCX.format(rows=MAX_ITERATIONS + 1, sleep=sleep))
-    head = tmp_path / "head.cvg"
-    head.write_text(CVG_HEAD)
+    script.write_text(FLIPPING_CCX.format(sleep=sleep))
+    cvg = _cvg(tmp_path, [(7, 1)] * (MAX_ITERATIONS + 1))
     settings = {
-        "command": [sys.executable, str(script), str(head)],
+        "command": [sys.executable, str(script), str(cvg)],
         "workdir_root": str(tmp_path / "work"),
         "timeout_s": 120,
     }
