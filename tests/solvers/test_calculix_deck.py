@@ -170,6 +170,7 @@ def test_ccx_stopping_is_a_failed_run_with_its_reason(tmp_path, monkeypatch, exi
     # The stand-in stops the same way when retried: every attempt's reason named.
     assert result["reason"] == (
         f"with fixed increments of 1.125°: {stopped}; "
+        f"again with fixed increments of 0.5625°: {stopped}; "
         f"again with automatic increments of at most 3°: {stopped}; "
         f"again with automatic increments of at most 1.5°: {stopped}"
     )
@@ -241,6 +242,7 @@ def test_a_stalled_ccx_is_retried_and_named(tmp_path, sleep):
     )
     assert result["reason"] == (
         f"with fixed increments of 1.125°: {stalled}; "
+        f"again with fixed increments of 0.5625°: {stalled}; "
         f"again with automatic increments of at most 3°: {stalled}; "
         f"again with automatic increments of at most 1.5°: {stalled}"
     )

@@ -148,12 +148,16 @@ def test_main_loop_with_calculix_end_to_end(ccx, tmp_path, monkeypatch):
 
 
 FLAKY_CCX = """#!/bin/sh
-# ccx that stops short (as ccx does: an *ERROR line, exit 0) for a deck of fixed increments
-# or one whose largest increment exceeds {limit} of the step, and otherwise is the real ccx
-echo "$(grep -A1 '^\\*STATIC' bending.inp | tr '\\n' ' ')" >> {log}
-largest=$(grep -A1 '^\\*STATIC' bending.inp | tail -n 1 | cut -d, -f4)
-if grep -q '^\\*STATIC, DIRECT' bending.inp ||
-   awk -v a="$largest" 'BEGIN {{ exit !(a + 0 > {limit}) }}'; then
+# ccx that stops short (as ccx does: an *ERROR line, exit 0) for a deck whose fixed
+# increment exceeds {fixed} of the step or whose largest automatic one exceeds {limit},
+# and otherwise is the real ccx
+static=$(grep -A1 '^\\*STATIC' bending.inp | tr '\\n' ' ')
+echo "$static" >> {log}
+case "$static" in
+  *DIRECT*) size=$(echo "$static" | cut -d' ' -f3 | cut -d, -f1); limit={fixed} ;;
+  *) size=$(echo "$static" | cut -d, -f4); limit={limit} ;;
+esac
+if awk -v a="$size" -v b="$limit" 'BEGIN {{ exit !(a + 0 > b + 0) }}'; then
   echo " *ERROR: increment size smaller than minimum"
   exit 0
 fi
@@ -161,21 +165,55 @@ exec {ccx} "$@"
 """
 
 
-def _flaky(tmp_path, ccx, limit):
+def _flaky(tmp_path, ccx, limit, fixed=0.0):
     script = tmp_path / "flaky-ccx"
-    script.write_text(FLAKY_CCX.format(limit=limit, log=tmp_path / "static.log", ccx=ccx))
+    log = tmp_path / "static.log"
+    script.write_text(FLAKY_CCX.format(limit=limit, fixed=fixed, log=log, ccx=ccx))
     script.chmod(0o755)
     return str(script)
 
 
+def _sizes(tmp_path):
+    """Each attempt's increments as ccx read them: their kinds ("fixed" or "automatic")
+    and sizes (the fixed or the largest one, of the step)."""
+    kinds, sizes = [], []
+    for line in (tmp_path / "static.log").read_text().splitlines():
+        fixed = "DIRECT" in line
+        kinds.append("fixed" if fixed else "automatic")
+        sizes.append(float(line.split()[2].split(",")[0] if fixed else line.split(",")[3]))
+    return kinds, sizes
+
+
+def test_a_run_stopped_short_is_retried_with_half_the_fixed_increment(ccx, tmp_path):
+    """ccx stopped short with the coarse mesh's fixed increments is run again with fixed
+    increments of half the size, so the curve stays one of fixed increments; the
+    retry's curve is a real ccx run's. 30° keeps it ~15 s."""
+    rig = Rig(max_angle_deg=30.0)
+    fixed = CALCULIX_MESHES["coarse"].fixed_increment_deg / rig.max_angle_deg
+    settings = {
+        "mesh": "coarse",
+        "timeout_s": 900,
+        "command": _flaky(tmp_path, ccx, 1.0, fixed=0.75 * fixed),
+    }
+    result = solve_inputs(solver_inputs(POINT, rig, solver="calculix", solver_settings=settings))
+    assert result["status"] == "ok", result["reason"]
+    kinds, sizes = _sizes(tmp_path)
+    assert kinds == ["fixed", "fixed"]
+    assert sizes == pytest.approx([fixed, RETRY_INCREMENT * fixed])
+    assert result["increments"] == "fixed increments of 0.5625°"
+    assert result["angle_deg"][-1] == 30.0
+    assert np.all(np.isfinite(result["force_n"])) and max(result["force_n"]) > 0.0
+
+
 def test_a_run_stopped_short_is_retried_with_smaller_increments(ccx, tmp_path):
-    """ccx stopped short with the coarse mesh's fixed increments and then with automatic
-    ones (an increment below the minimum, seen at 73–87° on the coarse mesh) is run once
-    more with half the largest increment; the last retry's curve is a real ccx run's.
+    """ccx stopped short with both fixed increments and then with automatic ones (an
+    increment below the minimum, seen at 73–87° on the coarse mesh) is run once more
+    with half the largest increment; the last retry's curve is a real ccx run's.
     30° keeps it ~10 s."""
     rig = Rig(max_angle_deg=30.0)
     mesh = CALCULIX_MESHES["coarse"]
     largest = mesh.max_increment_deg / rig.max_angle_deg  # 0.1 of the step
+    fixed = mesh.fixed_increment_deg / rig.max_angle_deg
     settings = {
         "mesh": "coarse",
         "timeout_s": 900,
@@ -183,11 +221,10 @@ def test_a_run_stopped_short_is_retried_with_smaller_increments(ccx, tmp_path):
     }
     result = solve_inputs(solver_inputs(POINT, rig, solver="calculix", solver_settings=settings))
     assert result["status"] == "ok", result["reason"]
-    fixed, automatic, smaller = (tmp_path / "static.log").read_text().splitlines()
-    assert fixed.startswith("*STATIC, DIRECT ")
-    assert float(fixed.split()[2].rstrip(",")) == pytest.approx(mesh.fixed_increment_deg / 30.0)
-    assert [float(line.split(",")[3]) for line in (automatic, smaller)] == pytest.approx(
-        [largest, RETRY_INCREMENT * largest]
+    kinds, sizes = _sizes(tmp_path)
+    assert kinds == ["fixed", "fixed", "automatic", "automatic"]
+    assert sizes == pytest.approx(
+        [fixed, RETRY_INCREMENT * fixed, largest, RETRY_INCREMENT * largest]
     )
     assert result["angle_deg"][-1] == 30.0
     assert np.all(np.isfinite(result["force_n"])) and max(result["force_n"]) > 0.0
@@ -198,7 +235,8 @@ def test_a_run_stopped_short_every_time_is_a_failed_run_naming_each(ccx, tmp_pat
     settings = {"mesh": "coarse", "timeout_s": 900, "command": _flaky(tmp_path, ccx, 0.0)}
     result = solve_inputs(solver_inputs(POINT, Rig(), solver="calculix", solver_settings=settings))
     assert result["status"] == "failed"
-    assert result["reason"].count("increment size smaller than minimum") == 3
+    assert result["reason"].count("increment size smaller than minimum") == 4
+    assert "again with fixed increments of 0.5625°" in result["reason"]
     assert "again with automatic increments of at most 3°" in result["reason"]
     assert "again with automatic increments of at most 1.5°" in result["reason"]
-    assert len((tmp_path / "static.log").read_text().splitlines()) == 3
+    assert len(_sizes(tmp_path)[0]) == 4
