@@ -32,8 +32,9 @@ The deck (after ``shared/calculix.md``, a model that converged to 90°):
   ``RETRY_INCREMENT`` of the mesh's (where fixed ones were used: the curve stays one of
   fixed increments, a few per cent from the first attempt's, not an automatic
   attempt's cutbacks), then with automatic increments, then with at most
-  ``RETRY_INCREMENT`` of the largest increment: ccx stops short when an increment is cut below the minimum
-  (seen at 73–87° on the coarse mesh for yielding coats at 10 and 15 mm), and with
+  ``RETRY_INCREMENT`` of the largest increment: ccx stops short when an increment is
+  cut below the minimum (seen at 73–87° on the coarse mesh for yielding coats at 10 and
+  15 mm), and with
   fixed increments its contact iterations can flip between two states for ever
   (seen for 8 minutes at 40 N end tension): more than ``MAX_ITERATIONS`` in one
   attempt of one increment end the attempt (:func:`stalled_increment`, read off ccx's
