@@ -34,13 +34,12 @@ The deck (after ``shared/calculix.md``, a model that converged to 90°):
   attempt's cutbacks), then with automatic increments, then with at most
   ``RETRY_INCREMENT`` of the largest increment: ccx stops short when an increment is
   cut below the minimum (seen at 73–87° on the coarse mesh for yielding coats at 10 and
-  15 mm), and with
-  fixed increments its contact iterations can flip between two states for ever
-  (seen for 8 minutes at 40 N end tension): more than ``MAX_ITERATIONS`` in one
-  attempt of one increment end the attempt (:func:`stalled_increment`, read off ccx's
-  ``.cvg`` as it runs and once more at its end, so the same run stops on every
-  machine). A run that reaches the angle at first is never re-run,
-  so its curve is the deck's; the result's ``increments`` says which attempt's it is.
+  15 mm), and with fixed increments its contact iterations can flip between two states
+  for ever (seen for 8 minutes at 40 N end tension): more than ``MAX_ITERATIONS`` in
+  one attempt of one increment end the attempt (:func:`stalled_increment`, read off
+  ccx's ``.cvg`` as it runs and once more at its end, so the same run stops on every
+  machine). A run that reaches the angle at first is never re-run, so its curve is the
+  deck's; the result's ``increments`` says which attempt's it is.
 
 Notations: x along the undeformed strip from the clamp edge, y across the
 width, z up through the thickness; the probe axis is parallel to y.
