@@ -10,9 +10,10 @@ diagnosis on curves CalculiX made, the built-in solver as its prior.
   Beside it, after the calibration, what CalculiX's own scatter leaves of that floor:
   the RMSE of the truth's neighbours 1 % thinner and thicker at the same D and Mp
   (``NEIGHBOUR``), over the truth's — a coating that close is as good as any
-  calibration can place one; where ccx cannot run the deck's fixed increments and
-  finishes with automatic ones (mid, at both lengths), its curves move by a few per
-  cent with those increments, and that ratio is well above 1.05.
+  calibration can place one; where a neighbour finishes with other increments than
+  the truth (a retry), its curve moves by a few per cent with them, and that ratio is
+  well above 1.05 (deck 8: mid 1.31 and 1.28, both lengths automatic; deck 9: paper's
+  thinner neighbour 1.12, at 15 mm with 0.5625° against the truth's 1.125°).
 - diagnosis (``--only diagnosis``): CalculiX-made curves with a hidden effect —
   ``hardening`` (a yielding coat, tests at 10 and 15 mm with replicates) and
   ``tension`` (tests at 0, 20 and 40 N with replicates) — and a decoy ``temperature_c``
