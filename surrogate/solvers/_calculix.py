@@ -24,19 +24,14 @@ The deck (after ``shared/calculix.md``, a model that converged to 90°):
   repeat itself — the same deck, one thread, took other cutbacks above ~75° where
   the coat yields, curves up to 5.8 % apart (``benchmarks/calculix_scatter.py``);
   with ``alea = 0`` four runs of that deck wrote the same ``.dat`` byte for byte;
-- the coarse mesh's increments are steady: every increment ``increment_deg`` (1.125°)
-  where ccx converges, as with fixed ones (``*STATIC, DIRECT``), but cut back where it
-  does not (ccx's automatic incrementation, its largest increment the steady one). With
-  automatic increments of up to 3° a coat 0.1 % thicker took other cutbacks and its
-  curve moved as much as one 1 % thicker (RMS/ε 40 N against 7.4 N), which finite
-  differences and a trust region read as gradient; with the same increments the curve
-  changes in proportion. Where no increment is cut back the ``.dat`` is the fixed
-  deck's byte for byte (checked on the paper coating, 10 mm); where fixed increments
-  stopped (their contact flipping between two states for ever near 86°, a thick soft
-  coat), the steady deck cuts back there only and the rest of the curve keeps its
-  increments (deck 9 then ran the whole curve again with 0.5625°, then with up to 3°);
-- a run that does not reach the angle is run again, first with steady increments of
-  ``RETRY_INCREMENT`` of the mesh's, then with automatic increments, then with at most
+- the coarse mesh's increments are fixed (``*STATIC, DIRECT``): with automatic ones
+  a coat 0.1 % thicker took other cutbacks and its curve moved as much as one 1 %
+  thicker (RMS/ε 40 N against 7.4 N), which finite differences and a trust region
+  read as gradient; with fixed increments the curve changes in proportion;
+- a run that does not reach the angle is run again, first with fixed increments of
+  ``RETRY_INCREMENT`` of the mesh's (where fixed ones were used: the curve stays one of
+  fixed increments, a few per cent from the first attempt's, not an automatic
+  attempt's cutbacks), then with automatic increments, then with at most
   ``RETRY_INCREMENT`` of the largest increment: ccx stops short when an increment is
   cut below the minimum (seen at 73–87° on the coarse mesh for yielding coats at 10 and
   15 mm), and with fixed increments its contact iterations can flip between two states
@@ -89,17 +84,15 @@ __all__ = [
 ]
 
 SLICE_WIDTH_MM = 0.2
-DECK_VERSION = "ccx-deck-10"
-"""Bump whenever a change to the deck changes results (it keys the cache). 10: steady
-increments (the fixed size, cut back only where ccx does not converge); 9: a retry
+DECK_VERSION = "ccx-deck-9"
+"""Bump whenever a change to the deck changes results (it keys the cache). 9: a retry
 with fixed increments of half the size before the automatic ones; 8: a stall
 judged on the whole ``.cvg``; 7: fixed increments on the coarse mesh; 6: contact
 without ccx's random part (``alea = 0``)."""
 CONTACT_CONTROLS = "0.001, 0., 100, 60"  # ccx's defaults (delcon, kscalemax, itf2f), alea 0
 RETRY_INCREMENT = 0.5  # a retry's increment (fixed; automatic: largest), of the mesh's
 MAX_ITERATIONS = 200  # in one attempt of one increment: a fixed increment's contact has
-# flipped (ccx cuts an increment back after the deck's 30 iterations; those that
-# converge take 3–8)
+# flipped (automatic increments stop at the deck's 30; fixed ones converged in 3–8)
 JOB = "bending"
 
 
@@ -122,12 +115,10 @@ class CalculixMesh:
         C3D8 elements around the probe's circumference.
     max_increment_deg, initial_increment_deg : float
         Rotation increments of the static step (automatic in between).
-    increment_deg : float or None
-        The static step's steady rotation increment: every increment this size where
-        ccx converges, cut back only where it does not (automatic incrementation whose
-        first and largest increment it is); None: automatic increments between
-        ``initial_increment_deg`` and ``max_increment_deg``. Its first retry is steady
-        too, of ``RETRY_INCREMENT`` the size; the later ones are automatic.
+    fixed_increment_deg : float or None
+        The static step's fixed rotation increment (``*STATIC, DIRECT``); None:
+        automatic increments. Its first retry is fixed too, of ``RETRY_INCREMENT`` the
+        size; the later ones are automatic.
     """
 
     element_mm: float
@@ -137,7 +128,7 @@ class CalculixMesh:
     probe_segments: int
     max_increment_deg: float
     initial_increment_deg: float
-    increment_deg: float | None = None
+    fixed_increment_deg: float | None = None
 
 
 CALCULIX_MESHES = {
@@ -372,10 +363,13 @@ class _Deck:
         return lines
 
     def _static(self, span: float) -> list[str]:
-        first, largest = _bounds(self.mesh)
+        mesh = self.mesh
+        if mesh.fixed_increment_deg is not None:
+            return ["*STATIC, DIRECT", f"{min(mesh.fixed_increment_deg, span) / span:.9g}, 1."]
         return [
             "*STATIC",
-            f"{min(first, span) / span:.9g}, 1., 1e-6, {min(largest, span) / span:.9g}",
+            f"{min(mesh.initial_increment_deg, span) / span:.9g}, 1., 1e-6, "
+            f"{min(mesh.max_increment_deg, span) / span:.9g}",
         ]
 
     def _end_load(self) -> list[str]:
@@ -562,7 +556,7 @@ class CalculixSolver(Solver):
         for attempt in _attempts(CALCULIX_MESHES[settings.get("mesh", "coarse")]):
             result = self._attempt(state, attempt, settings)
             if result.get("status") != "failed":  # a timeout raises: not retried
-                return result
+                return {**result, "increments": _increments(attempt)}
             said = "with" if not reasons else "again with"
             reasons.append(f"{said} {_increments(attempt)}: {result['reason']}")
         return failed_result("; ".join(reasons))
@@ -600,15 +594,15 @@ class CalculixSolver(Solver):
         if why is not None:
             reached = -math.degrees(history.rotation_rad[-1]) if history.time.size else 0.0
             return failed_result(f"{why} (last converged {reached:.2f}°)")
-        return {**_curve(history, state), "increments": _increments(mesh, history)}
+        return _curve(history, state)
 
 
 def _attempts(mesh: CalculixMesh) -> list[CalculixMesh]:
-    """The decks a run tries in turn: the mesh's own; where it has steady increments,
-    steady ones of ``RETRY_INCREMENT`` the size; then automatic increments, then
-    automatic ones of at most ``RETRY_INCREMENT`` of the largest."""
-    steady = mesh.increment_deg
-    automatic = replace(mesh, increment_deg=None)
+    """The decks a run tries in turn: the mesh's own; where it has fixed increments,
+    fixed ones of ``RETRY_INCREMENT`` the size; then automatic increments, then automatic
+    ones of at most ``RETRY_INCREMENT`` of the largest."""
+    fixed = mesh.fixed_increment_deg
+    automatic = replace(mesh, fixed_increment_deg=None)
     smaller = replace(
         automatic,
         max_increment_deg=RETRY_INCREMENT * mesh.max_increment_deg,
@@ -616,33 +610,15 @@ def _attempts(mesh: CalculixMesh) -> list[CalculixMesh]:
             mesh.initial_increment_deg, RETRY_INCREMENT * mesh.max_increment_deg
         ),
     )
-    if steady is None:
+    if fixed is None:
         return [automatic, smaller]
-    return [mesh, replace(mesh, increment_deg=RETRY_INCREMENT * steady), automatic, smaller]
+    return [mesh, replace(mesh, fixed_increment_deg=RETRY_INCREMENT * fixed), automatic, smaller]
 
 
-def _bounds(mesh: CalculixMesh) -> tuple[float, float]:
-    """The static step's first and largest increment [deg]: both the steady one, where
-    the mesh has one."""
-    if mesh.increment_deg is not None:
-        return mesh.increment_deg, mesh.increment_deg
-    return mesh.initial_increment_deg, mesh.max_increment_deg
-
-
-def _increments(mesh: CalculixMesh, history: CalculixHistory | None = None) -> str:
-    """The increments of an attempt; with the ``history`` of a run that finished, what
-    ccx did: how many of a steady deck's increments were smaller, where it cut back (the
-    last one, which ends the step, is not counted)."""
-    if mesh.increment_deg is None:
-        return f"automatic increments of at most {mesh.max_increment_deg:g}°"
-    said = f"increments of {mesh.increment_deg:g}°"
-    if history is None or history.time.size < 2:
-        return said
-    sizes = np.abs(np.diff(np.degrees(np.concatenate(([0.0], history.rotation_rad)))))[:-1]
-    smaller = int(np.count_nonzero(sizes < (1.0 - 1e-4) * mesh.increment_deg))
-    if not smaller:
-        return said
-    return f"{said}, {smaller} of {history.time.size} smaller where ccx cut back"
+def _increments(mesh: CalculixMesh) -> str:
+    if mesh.fixed_increment_deg is not None:
+        return f"fixed increments of {mesh.fixed_increment_deg:g}°"
+    return f"automatic increments of at most {mesh.max_increment_deg:g}°"
 
 
 def stalled_increment(cvg: Path) -> str | None:

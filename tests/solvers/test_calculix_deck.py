@@ -13,10 +13,8 @@ from surrogate.solvers import CALCULIX_MESHES, calculix_deck, parse_calculix_dat
 from surrogate.solvers._calculix import (
     MAX_ITERATIONS,
     SLICE_WIDTH_MM,
-    CalculixHistory,
     _curve,
     _Deck,
-    _increments,
     ccx_failure,
     stalled_increment,
 )
@@ -81,12 +79,11 @@ def test_materials_contact_and_step_carry_the_inputs():
     assert blocks["*SURFACE BEHAVIOR, PRESSURE-OVERCLOSURE=LINEAR"] == ["1000"]
     rotation = [line for line in blocks["*BOUNDARY"] if line.endswith(f"{-math.pi / 2:.12g}")]
     assert len(rotation) == 1  # the clamp's rotation node turns −90° about y
-    # coarse: steady increments of 1.125°, first = largest, cut back only where ccx does
-    # not converge (automatic ones of up to 3° moved the curve by more than a coat 0.1 %
-    # thicker does)
-    assert "*STATIC, DIRECT" not in blocks
-    assert [float(v) for v in blocks["*STATIC"][0].split(",")] == pytest.approx(
-        [1.125 / 90.0, 1.0, 1e-6, 1.125 / 90.0]
+    # coarse: fixed increments of 1.125° (automatic ones moved the curve by more than a
+    # coat 0.1 % thicker does)
+    assert "*STATIC" not in blocks
+    assert [float(v) for v in blocks["*STATIC, DIRECT"][0].split(",")] == pytest.approx(
+        [1.125 / 90.0, 1.0]
     )
     fine = _blocks(calculix_deck(STATE, mesh="fine"))
     assert [float(v) for v in fine["*STATIC"][0].split(",")][3] == pytest.approx(1.0 / 90.0)
@@ -172,8 +169,8 @@ def test_ccx_stopping_is_a_failed_run_with_its_reason(tmp_path, monkeypatch, exi
     stopped = "ccx did not reach 90°: *ERROR: too many cutbacks (last converged 26.25°)"
     # The stand-in stops the same way when retried: every attempt's reason named.
     assert result["reason"] == (
-        f"with increments of 1.125°: {stopped}; "
-        f"again with increments of 0.5625°: {stopped}; "
+        f"with fixed increments of 1.125°: {stopped}; "
+        f"again with fixed increments of 0.5625°: {stopped}; "
         f"again with automatic increments of at most 3°: {stopped}; "
         f"again with automatic increments of at most 1.5°: {stopped}"
     )
@@ -244,28 +241,8 @@ def test_a_stalled_ccx_is_retried_and_named(tmp_path, sleep):
         "(attempt 1) (last converged 0.00°)"
     )
     assert result["reason"] == (
-        f"with increments of 1.125°: {stalled}; "
-        f"again with increments of 0.5625°: {stalled}; "
+        f"with fixed increments of 1.125°: {stalled}; "
+        f"again with fixed increments of 0.5625°: {stalled}; "
         f"again with automatic increments of at most 3°: {stalled}; "
         f"again with automatic increments of at most 1.5°: {stalled}"
     )
-
-
-def test_increments_say_how_many_steady_ones_ccx_cut_back():
-    """A finished run's ``increments``: the steady size where every increment but the
-    step's last had it; else how many were smaller (ccx cut back there and grew again)."""
-    coarse = CALCULIX_MESHES["coarse"]
-
-    def history(degrees):
-        rotation = -np.radians(np.cumsum(degrees))
-        return CalculixHistory(np.cumsum(degrees) / 30.0, np.zeros((len(degrees), 3)), rotation)
-
-    steady = [1.125] * 26 + [30.0 - 26 * 1.125]  # the last increment ends the step
-    assert _increments(coarse, history(steady)) == "increments of 1.125°"
-    cut = [1.125] * 10 + [0.28125, 0.421875, 0.6328125, 0.9492188] + [1.125] * 14
-    cut.append(30.0 - sum(cut))
-    assert _increments(coarse, history(cut)) == (
-        "increments of 1.125°, 4 of 29 smaller where ccx cut back"
-    )
-    automatic = CALCULIX_MESHES["fine"]
-    assert _increments(automatic, history(cut)) == "automatic increments of at most 1°"

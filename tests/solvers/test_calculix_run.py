@@ -47,7 +47,7 @@ def test_the_same_deck_gives_the_same_curve(ccx, tmp_path):
     """Where the coat yields, ccx 2.20 with automatic increments and its contact's random
     part (``alea``, default 0.1) took other cutbacks above ~75° when the same deck ran
     again: curves up to 5.8 % apart (README, "CalculiX"); this test failed so. With the
-    deck's steady increments and ``alea = 0`` two runs of one input agree to the last
+    deck's fixed increments and ``alea = 0`` two runs of one input agree to the last
     digit. A coat a calibration of the paper curves ran, 10 mm, to 90°, both runs at once
     (~30 s)."""
     yielding = {
@@ -63,7 +63,7 @@ def test_the_same_deck_gives_the_same_curve(ccx, tmp_path):
     assert first["status"] == second["status"] == "ok", (first["reason"], second["reason"])
     assert first["angle_deg"][-1] == 90.0
     assert first["force_n"] == second["force_n"]
-    assert first["increments"] == "increments of 1.125°"
+    assert first["increments"] == "fixed increments of 1.125°"
 
 
 def test_timeout_is_a_failed_run(ccx, tmp_path):
@@ -148,10 +148,16 @@ def test_main_loop_with_calculix_end_to_end(ccx, tmp_path, monkeypatch):
 
 
 FLAKY_CCX = """#!/bin/sh
-# ccx that stops short (as ccx does: an *ERROR line, exit 0) in its first {stops}
-# runs, and otherwise is the real ccx; each run's *STATIC data line goes to {log}
-grep -A1 '^\\*STATIC' bending.inp | tail -n 1 >> {log}
-if [ "$(wc -l < {log})" -le {stops} ]; then
+# ccx that stops short (as ccx does: an *ERROR line, exit 0) for a deck whose fixed
+# increment exceeds {fixed} of the step or whose largest automatic one exceeds {limit},
+# and otherwise is the real ccx
+static=$(grep -A1 '^\\*STATIC' bending.inp | tr '\\n' ' ')
+echo "$static" >> {log}
+case "$static" in
+  *DIRECT*) size=$(echo "$static" | cut -d' ' -f3 | cut -d, -f1); limit={fixed} ;;
+  *) size=$(echo "$static" | cut -d, -f4); limit={limit} ;;
+esac
+if awk -v a="$size" -v b="$limit" 'BEGIN {{ exit !(a + 0 > b + 0) }}'; then
   echo " *ERROR: increment size smaller than minimum"
   exit 0
 fi
@@ -159,58 +165,66 @@ exec {ccx} "$@"
 """
 
 
-def _flaky(tmp_path, ccx, stops):
+def _flaky(tmp_path, ccx, limit, fixed=0.0):
     script = tmp_path / "flaky-ccx"
     log = tmp_path / "static.log"
-    script.write_text(FLAKY_CCX.format(stops=stops, log=log, ccx=ccx))
+    script.write_text(FLAKY_CCX.format(limit=limit, fixed=fixed, log=log, ccx=ccx))
     script.chmod(0o755)
     return str(script)
 
 
-def _increments(tmp_path):
-    """Each attempt's first and largest increment, of the step, as ccx read them."""
-    lines = (tmp_path / "static.log").read_text().splitlines()
-    return [(float(line.split(",")[0]), float(line.split(",")[3])) for line in lines]
+def _sizes(tmp_path):
+    """Each attempt's increments as ccx read them: their kinds ("fixed" or "automatic")
+    and sizes (the fixed or the largest one, of the step)."""
+    kinds, sizes = [], []
+    for line in (tmp_path / "static.log").read_text().splitlines():
+        fixed = "DIRECT" in line
+        kinds.append("fixed" if fixed else "automatic")
+        sizes.append(float(line.split()[2].split(",")[0] if fixed else line.split(",")[3]))
+    return kinds, sizes
 
 
-def test_a_run_stopped_short_is_retried_with_half_the_steady_increment(ccx, tmp_path):
-    """ccx stopped short with the coarse mesh's steady increments is run again with
-    steady increments of half the size (first = largest increment: ccx keeps it wherever
-    it converges); the retry's curve is a real ccx run's. 30° keeps it ~15 s."""
+def test_a_run_stopped_short_is_retried_with_half_the_fixed_increment(ccx, tmp_path):
+    """ccx stopped short with the coarse mesh's fixed increments is run again with fixed
+    increments of half the size, so the curve stays one of fixed increments; the
+    retry's curve is a real ccx run's. 30° keeps it ~15 s."""
     rig = Rig(max_angle_deg=30.0)
-    steady = CALCULIX_MESHES["coarse"].increment_deg / rig.max_angle_deg
-    settings = {"mesh": "coarse", "timeout_s": 900, "command": _flaky(tmp_path, ccx, 1)}
+    fixed = CALCULIX_MESHES["coarse"].fixed_increment_deg / rig.max_angle_deg
+    settings = {
+        "mesh": "coarse",
+        "timeout_s": 900,
+        "command": _flaky(tmp_path, ccx, 1.0, fixed=0.75 * fixed),
+    }
     result = solve_inputs(solver_inputs(POINT, rig, solver="calculix", solver_settings=settings))
     assert result["status"] == "ok", result["reason"]
-    half = RETRY_INCREMENT * steady
-    np.testing.assert_allclose(_increments(tmp_path), [(steady, steady), (half, half)], rtol=1e-6)
-    assert result["increments"] == "increments of 0.5625°"  # none cut back at this point
+    kinds, sizes = _sizes(tmp_path)
+    assert kinds == ["fixed", "fixed"]
+    assert sizes == pytest.approx([fixed, RETRY_INCREMENT * fixed])
+    assert result["increments"] == "fixed increments of 0.5625°"
     assert result["angle_deg"][-1] == 30.0
     assert np.all(np.isfinite(result["force_n"])) and max(result["force_n"]) > 0.0
 
 
 def test_a_run_stopped_short_is_retried_with_smaller_increments(ccx, tmp_path):
-    """ccx stopped short with both steady increments and then with automatic ones (an
+    """ccx stopped short with both fixed increments and then with automatic ones (an
     increment below the minimum, seen at 73–87° on the coarse mesh) is run once more
     with half the largest increment; the last retry's curve is a real ccx run's.
     30° keeps it ~10 s."""
     rig = Rig(max_angle_deg=30.0)
     mesh = CALCULIX_MESHES["coarse"]
-    first, largest = mesh.initial_increment_deg / 30.0, mesh.max_increment_deg / 30.0
-    steady = mesh.increment_deg / rig.max_angle_deg
-    settings = {"mesh": "coarse", "timeout_s": 900, "command": _flaky(tmp_path, ccx, 3)}
+    largest = mesh.max_increment_deg / rig.max_angle_deg  # 0.1 of the step
+    fixed = mesh.fixed_increment_deg / rig.max_angle_deg
+    settings = {
+        "mesh": "coarse",
+        "timeout_s": 900,
+        "command": _flaky(tmp_path, ccx, 0.75 * largest),
+    }
     result = solve_inputs(solver_inputs(POINT, rig, solver="calculix", solver_settings=settings))
     assert result["status"] == "ok", result["reason"]
-    half = RETRY_INCREMENT * largest
-    np.testing.assert_allclose(
-        _increments(tmp_path),
-        [
-            (steady, steady),
-            (RETRY_INCREMENT * steady, RETRY_INCREMENT * steady),
-            (first, largest),
-            (min(first, half), half),
-        ],
-        rtol=1e-6,
+    kinds, sizes = _sizes(tmp_path)
+    assert kinds == ["fixed", "fixed", "automatic", "automatic"]
+    assert sizes == pytest.approx(
+        [fixed, RETRY_INCREMENT * fixed, largest, RETRY_INCREMENT * largest]
     )
     assert result["angle_deg"][-1] == 30.0
     assert np.all(np.isfinite(result["force_n"])) and max(result["force_n"]) > 0.0
@@ -218,11 +232,11 @@ def test_a_run_stopped_short_is_retried_with_smaller_increments(ccx, tmp_path):
 
 
 def test_a_run_stopped_short_every_time_is_a_failed_run_naming_each(ccx, tmp_path):
-    settings = {"mesh": "coarse", "timeout_s": 900, "command": _flaky(tmp_path, ccx, 4)}
+    settings = {"mesh": "coarse", "timeout_s": 900, "command": _flaky(tmp_path, ccx, 0.0)}
     result = solve_inputs(solver_inputs(POINT, Rig(), solver="calculix", solver_settings=settings))
     assert result["status"] == "failed"
     assert result["reason"].count("increment size smaller than minimum") == 4
-    assert "again with increments of 0.5625°" in result["reason"]
+    assert "again with fixed increments of 0.5625°" in result["reason"]
     assert "again with automatic increments of at most 3°" in result["reason"]
     assert "again with automatic increments of at most 1.5°" in result["reason"]
-    assert len(_increments(tmp_path)) == 4
+    assert len(_sizes(tmp_path)[0]) == 4
