@@ -8,6 +8,7 @@ tests/solvers/test_calculix_run.py.
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import tomllib
@@ -502,11 +503,12 @@ def test_the_walk_goes_on_along_the_probes_line_while_the_expensive_rmse_falls(
     path = _calibration_study(log_runs / "cal", BENDING, TRUTHS[0], seed=1, settings=settings)
     result = surrogate.calibrate(path, progress=False)
     assert result.status == "converged", result.message
-    (start, verified, before), = walks
+    ((start, verified, before),) = walks
     walked = verified[before:]
     assert len(walked) >= 2, "the probe was better and the line goes on within the bounds"
-    assert walked[-1].rmse >= min(v.rmse for v in verified[: len(verified) - 1])
-    assert all(b.rmse < a.rmse for a, b in zip(walked[:-2], walked[1:-1], strict=True))
+    probe = min(verified[:before], key=lambda v: v.rmse)
+    rmse = [v.rmse for v in [probe, *walked]]
+    assert all(b < a for a, b in itertools.pairwise(rmse[:-1])) and rmse[-1] >= rmse[-2]
     assert walked[-1].calls <= WALK_SHARE * 30
     # on the line: optimum, best probe, steps of the same length — in the fit coordinates
     from surrogate.calibration._problem import load_calibration
@@ -514,10 +516,9 @@ def test_the_walk_goes_on_along_the_probes_line_while_the_expensive_rmse_falls(
     spec, _, _, _ = load_calibration(path, None, ())
     space = spec.space
     coordinates = FitCoordinates(space, spec.rig.thickness_mm)
-    probe = min(verified[:before], key=lambda v: v.rmse)
     x = [coordinates.from_unit(space.to_unit(v.theta)[0]) for v in [probe, *walked]]
     step = x[0] - coordinates.from_unit(space.to_unit(start)[0])
-    for here, there in zip(x[:-1], x[1:], strict=True):  # clipped at the box's bounds
+    for here, there in itertools.pairwise(x):  # clipped at the box's bounds
         np.testing.assert_allclose(there, np.clip(here + step, 0.0, 1.0), atol=1e-9)
 
 
