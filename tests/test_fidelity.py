@@ -8,7 +8,6 @@ tests/solvers/test_calculix_run.py.
 
 from __future__ import annotations
 
-import itertools
 import json
 import logging
 import tomllib
@@ -478,48 +477,6 @@ def test_the_probes_run_after_a_corrected_optimum_the_expensive_solver_ran(
     assert taught[0][1], "the expensive solver ran the corrected optimum"
     assert len(probes) == 1 and probes[0], "the built-in curves leave a parameter free here"
     assert np.array_equal(taught[1][0], probes[0][0][0])  # the first probe, the next run
-
-
-@pytest.mark.slow
-def test_the_walk_goes_on_along_the_probes_line_while_the_expensive_rmse_falls(
-    distorted_solver, log_runs, monkeypatch
-):
-    """Where a probe verified better than the corrected model's optimum, the next runs go
-    on along the line from the optimum through it, a probe's step at a time, and stop at
-    the first point that is not better (here, the mid coating with seed 1: one step)."""
-    from surrogate.calibration._fidelity import WALK_SHARE, CorrectedCalibration
-    from surrogate.calibration._local import FitCoordinates
-
-    walks: list[tuple[np.ndarray, list, int]] = []
-    walk = CorrectedCalibration._walk
-
-    def spy_walk(self, start):
-        before = len(self.verified)
-        walk(self, start)
-        walks.append((np.array(start), list(self.verified), before))
-
-    monkeypatch.setattr(CorrectedCalibration, "_walk", spy_walk)
-    settings = " ".join(f"{k} = {v}" for k, v in THICK.items())
-    path = _calibration_study(log_runs / "cal", BENDING, TRUTHS[0], seed=1, settings=settings)
-    result = surrogate.calibrate(path, progress=False)
-    assert result.status == "converged", result.message
-    ((start, verified, before),) = walks
-    walked = verified[before:]
-    assert len(walked) >= 2, "the probe was better and the line goes on within the bounds"
-    probe = min(verified[:before], key=lambda v: v.rmse)
-    rmse = [v.rmse for v in [probe, *walked]]
-    assert all(b < a for a, b in itertools.pairwise(rmse[:-1])) and rmse[-1] >= rmse[-2]
-    assert walked[-1].calls <= WALK_SHARE * 30
-    # on the line: optimum, best probe, steps of the same length — in the fit coordinates
-    from surrogate.calibration._problem import load_calibration
-
-    spec, _, _, _ = load_calibration(path, None, ())
-    space = spec.space
-    coordinates = FitCoordinates(space, spec.rig.thickness_mm)
-    x = [coordinates.from_unit(space.to_unit(v.theta)[0]) for v in [probe, *walked]]
-    step = x[0] - coordinates.from_unit(space.to_unit(start)[0])
-    for here, there in itertools.pairwise(x):  # clipped at the box's bounds
-        np.testing.assert_allclose(there, np.clip(here + step, 0.0, 1.0), atol=1e-9)
 
 
 def test_the_held_out_error_of_a_verified_fit_without_its_jacobian_is_the_corrected_models(

@@ -66,7 +66,6 @@ CURVE_PRIOR_SD = 0.05  # asinh scale ≈ log F: before any expensive run, ~5 % a
 CURVE_NOISE_SD = 1e-3  # the expensive curve's own scatter (mesh, increments): ~0.1 %
 LOW_FIDELITY_BUDGET = 1000  # built-in runs of the first, built-in-only calibration
 PROBE_STEP = 0.25  # the probes: a quarter of a range either way (``_probes``)
-WALK_SHARE = 0.5  # the walk along the probes' line: at most half the budget (``_walk``)
 # the trust region of the corrected model's proposals (Alexandrov, Dennis, Lewis & Torczon
 # 1998: a model managed by the ratio of the verified to the predicted decrease)
 SHRINK_BELOW, EXPAND_ABOVE = 0.25, 0.75  # ratios: a quarter of the step / twice the radius
@@ -210,8 +209,6 @@ class CorrectedCalibration(CalibrationLoop):
         if not self.verified:  # nothing verified to go on from
             self._single_fidelity(surrogate_trials)
             return
-        if probes:
-            self._walk(theta)
         while self.verified and self.dropped is None and self.runs.calls + G <= self.budget:
             theta = self._next()
             if theta is None:
@@ -324,42 +321,6 @@ class CorrectedCalibration(CalibrationLoop):
             f"at {len(probes)} point(s) of the same D and Mp, a thinner and a thicker coat"
         )
         return probes
-
-    def _walk(self, start: np.ndarray) -> None:
-        """Onwards along the line from the built-in optimum ``start`` through the best
-        probe, a probe's step at a time, while the expensive solver's RMSE falls — at
-        most ``WALK_SHARE`` of the budget.
-
-        Along that line the built-in curves hardly change, so the corrected model knows
-        of it only what the probes taught it, and its proposals beyond them are an
-        extrapolation of three points; CalculiX's curves there change shape with Tcoat
-        (a mid coating's built-in optimum, Tcoat 0.039 mm, verified 0.28 N, its truth at
-        0.02 mm 0.044 N), and where the line starts in a region ccx finishes only with
-        automatic increments its proposals there verified worse or failed. The walk
-        needs no model: only that the expensive RMSE falls along the line until it
-        turns, which the first step past the turn shows (the trust region goes on from
-        the best point either way).
-        """
-        best = self.best()
-        if best is None or np.array_equal(best.theta, start):
-            return  # the optimum is still the best: no direction to go on in
-        space, G = self.problem.space, len(self.problem.groups)
-        coordinates = FitCoordinates(space, self.problem.spec.rig.thickness_mm)
-        x = coordinates.from_unit(space.to_unit(best.theta)[0])
-        step = x - coordinates.from_unit(space.to_unit(start)[0])
-        walked = 0
-        while self.dropped is None and self.runs.calls + G <= WALK_SHARE * self.budget:
-            following = np.clip(x + step, 0.0, 1.0)
-            if np.max(np.abs(following - x)) <= FIRST_ORDER_BOX:
-                break  # at a bound
-            theta = space.clip(space.from_unit(coordinates.to_unit(following)[None])[0])
-            if not self._teach(theta) or self.verified[-1].rmse >= best.rmse:
-                break
-            best, x, walked = self.verified[-1], following, walked + 1
-        self._say(
-            f"walked {walked} step(s) on along the probes' line: best verified RMSE "
-            f"{best.rmse:.4g} N, {self.runs.calls} expensive runs"
-        )
 
     def _teach(self, theta: np.ndarray) -> bool:
         """Verify ``theta`` with the expensive solver and teach the correction its runs;
