@@ -15,7 +15,9 @@ scale) make the two cases it must refuse; ``thick`` a change of shape with Tcoat
 and Mp, which the built-in curves hardly show (CalculiX's coarse mesh does: 20 % more
 Tcoat at the same D and Mp moved a fit's RMSE from 0.044 to 0.19 N). Like CalculiX it
 refuses a bare-webbing stiffness (``membrane_bending``); ``fail_above_tcoat_mm`` makes
-it fail where the coat is thicker, as ccx stops short for thick coats. Every run appends
+it fail where the coat is thicker, as ccx stops short for thick coats, and
+``retry_above_tcoat_mm`` says of its runs there that they finished after a retry (the
+result's ``retried_after``, as CalculiX's), its curve unchanged. Every run appends
 its input hash to the file named by ``$SURROGATE_TEST_SOLVER_LOG`` (when set), so a test
 counts the expensive runs.
 """
@@ -51,6 +53,7 @@ class DistortedSolver(Solver):
         "rough",
         "thick",
         "fail_above_tcoat_mm",
+        "retry_above_tcoat_mm",
     )
 
     def refuses(self, state: Any) -> str | None:
@@ -80,7 +83,11 @@ class DistortedSolver(Solver):
         factor = distortion(inputs, np.asarray(result["angle_deg"]), settings)
         force = np.asarray(result["force_n"]) * factor
         perp = np.asarray(result["force_perp_n"]) * factor
-        return ok_result(np.asarray(result["angle_deg"]), force, perp)
+        out = ok_result(np.asarray(result["angle_deg"]), force, perp)
+        retry = settings.get("retry_above_tcoat_mm")
+        if retry is not None and state.tcoat_mm > retry:  # as ccx's retries say it
+            out["retried_after"] = f"with fixed increments: stopped (thicker than {retry} mm)"
+        return out
 
 
 def distortion(inputs: dict[str, Any], angle_deg: np.ndarray, settings: dict[str, float]):

@@ -252,6 +252,7 @@ def test_calibration_reaches_the_expensive_solvers_noise_floor_in_few_expensive_
     mf = result.multi_fidelity
     assert mf["dropped"] is None and mf["low_fidelity_runs"] > result.solver_calls
     assert "at a point test-distorted verified" in result.message
+    assert result.retried == {} and "retry" not in result.message  # every run the first
     # the reported size of the correction is the solvers' difference at the answer
     coat = {k: result.params[k] for k in ("ecoat_gpa", "scoat_gpa", "tcoat_mm")}
     ratios = [
@@ -263,6 +264,28 @@ def test_calibration_reaches_the_expensive_solvers_noise_floor_in_few_expensive_
     ]
     reported = mf["correction"]["f60_percent"]  # the group of the larger curve difference
     assert any(reported == pytest.approx(100 * (r - 1), abs=1e-6) for r in ratios)
+
+
+@pytest.mark.slow
+def test_a_calibration_says_where_the_expensive_solver_finished_only_after_a_retry(
+    distorted_solver, log_runs
+):
+    """Where the expensive solver finished the runs at the answer only after a retry (as
+    ccx does with other increments, whose curves jump by a few per cent between
+    neighbours), the result names the tests and why the first attempts stopped, and the
+    message says a local optimum at the noise level may not be verifiable there."""
+    settings = "retry_above_tcoat_mm = 0.001"  # every coat of the range
+    path = _calibration_study(log_runs / "cal", BENDING, TRUTHS[0], seed=0, settings=settings)
+    result = surrogate.calibrate(path, progress=False)
+    assert result.retried == {
+        "l10": "with fixed increments: stopped (thicker than 0.001 mm)",
+        "l15": "with fixed increments: stopped (thicker than 0.001 mm)",
+    }
+    assert "test-distorted finished test(s) l10, l15 at this point only after a retry" in (
+        result.message
+    )
+    assert "may not be verifiable here" in result.message
+    assert result.to_json()["retried"] == result.retried
 
 
 FAILING = [  # (truth, the Tcoat above which the expensive solver fails, seed)

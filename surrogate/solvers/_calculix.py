@@ -39,7 +39,8 @@ The deck (after ``shared/calculix.md``, a model that converged to 90°):
   one attempt of one increment end the attempt (:func:`stalled_increment`, read off
   ccx's ``.cvg`` as it runs and once more at its end, so the same run stops on every
   machine). A run that reaches the angle at first is never re-run, so its curve is the
-  deck's; the result's ``increments`` says which attempt's it is.
+  deck's; the result's ``increments`` says which attempt's it is, ``retried_after`` why
+  the earlier ones stopped ("" for the deck's own).
 
 Notations: x along the undeformed strip from the clamp edge, y across the
 width, z up through the thickness; the probe axis is parallel to y.
@@ -552,11 +553,15 @@ class CalculixSolver(Solver):
     def _solve(self, inputs: Mapping[str, Any]) -> dict[str, Any]:
         settings = self.check_settings(inputs.get("solver_settings") or {})
         state = model_state(inputs)
-        reasons = []
+        reasons: list[str] = []
         for attempt in _attempts(CALCULIX_MESHES[settings.get("mesh", "coarse")]):
             result = self._attempt(state, attempt, settings)
             if result.get("status") != "failed":  # a timeout raises: not retried
-                return {**result, "increments": _increments(attempt)}
+                return {
+                    **result,
+                    "increments": _increments(attempt),
+                    "retried_after": "; ".join(reasons),  # "": the deck's own attempt
+                }
             said = "with" if not reasons else "again with"
             reasons.append(f"{said} {_increments(attempt)}: {result['reason']}")
         return failed_result("; ".join(reasons))

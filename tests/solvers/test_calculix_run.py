@@ -201,6 +201,7 @@ def test_a_run_stopped_short_is_retried_with_half_the_fixed_increment(ccx, tmp_p
     assert kinds == ["fixed", "fixed"]
     assert sizes == pytest.approx([fixed, RETRY_INCREMENT * fixed])
     assert result["increments"] == "fixed increments of 0.5625°"
+    assert result["retried_after"].startswith("with fixed increments of 1.125°: ")
     assert result["angle_deg"][-1] == 30.0
     assert np.all(np.isfinite(result["force_n"])) and max(result["force_n"]) > 0.0
 
@@ -229,6 +230,9 @@ def test_a_run_stopped_short_is_retried_with_smaller_increments(ccx, tmp_path):
     assert result["angle_deg"][-1] == 30.0
     assert np.all(np.isfinite(result["force_n"])) and max(result["force_n"]) > 0.0
     assert result["increments"] == "automatic increments of at most 1.5°"
+    said = result["retried_after"]  # every earlier attempt, why it stopped
+    assert said.startswith("with fixed increments of 1.125°: ") and said.count("; again with") == 2
+    assert "again with automatic increments of at most 3°: " in said
 
 
 def test_a_run_stopped_short_every_time_is_a_failed_run_naming_each(ccx, tmp_path):
