@@ -187,6 +187,7 @@ def calibration_case(task: tuple[str, Path]) -> dict[str, Any]:
         "dropped": mf.get("dropped"),
         "seconds": seconds,
         "message": result.message,
+        "retried": result.retried,
     }
 
 
@@ -249,6 +250,8 @@ def _print(row: dict[str, Any]) -> None:
             f"RMSE/truth {low:.3f}, {high:.3f}",
             flush=True,
         )
+        for test_id, why in (row.get("retried") or {}).items():  # at the answer
+            print(f"  test {test_id} at the answer finished after a retry: {why}", flush=True)
         return
     print(
         f"diagnosis hidden {row['set']:<10} first {row['first'] or '-':<16} named "
