@@ -74,3 +74,30 @@ def test_a_fit_started_near_its_optimum_is_tested_first_without_least_squares(
     assert runs.calls <= 1 * G + rounds * (p * G + len(_local.BACKTRACK) * G)
     resolution = _local.gain_tolerance(problem.n_points, p, _local.ROUGH_CHI2)
     assert fit.rmse <= usual.rmse * (1 + resolution)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_a_fit_names_the_runs_it_was_evaluated_with(tmp_path, seed):
+    """The fit's parameters are those its curves were run at, to the last bit, wherever
+    its point came from (``best_evaluated`` rebuilds x from a rounded memo key): their
+    result-cache keys name the cached runs, so a resumed calibration repeats no run.
+    Before, a point a finite-difference Jacobian had run came back an ulp away."""
+    problem = _problem(tmp_path, seed)
+    runs = SolverRuns(problem, tmp_path / "cache", jobs=1)
+    model = ResidualModel(problem, runs)
+    rng = np.random.default_rng(seed)
+    start = np.array([TRUTH["ecoat_gpa"], TRUTH["scoat_gpa"], TRUTH["tcoat_mm"]])
+    x = model.pin(start)
+    model.jacobian(x)  # runs at x and at a shifted point per coordinate
+    for _ in range(5):
+        x = np.clip(x + rng.uniform(-0.05, 0.05, x.size) / 3.0 * np.pi, 0.0, 1.0)
+        model.evaluate(x)
+    rebuilt = model.best_evaluated()
+    assert rebuilt is not None
+    theta = model.point(rebuilt)
+    keys = model.keys(theta)
+    assert all(runs.cache.get(key) is not None for key in keys)
+    assert set(keys) <= runs.used
+    calls = runs.calls
+    model.evaluate(rebuilt)
+    assert runs.calls == calls

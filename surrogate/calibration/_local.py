@@ -204,6 +204,10 @@ class ResidualModel:
             ):
                 raise BudgetSpent(f"{self.runs.calls} of {self.budget} solver runs used")
             out = self.runs.run(thetas, groups)
+            # the point stays the runs it was evaluated with: an x rebuilt from its memo key
+            # (``best_evaluated``, rounded) gave parameters an ulp away, whose result-cache
+            # keys named no run (a resumed calibration would have run them again)
+            self._pinned.setdefault(key, thetas[0].copy())
             if any(o is None for o in out):
                 self._memo[key] = (self._failed_residual, None)
             else:
