@@ -265,18 +265,19 @@ def _retried(loop: CalibrationLoop, best: VerifiedPoint) -> tuple[dict[str, str]
     """The tests whose run at ``best`` the solver finished only after a retry (its
     result's ``retried_after``): test id → why the earlier attempts stopped; and the
     sentence the message adds ("" where there are none)."""
-    problem, said, finished = loop.problem, {}, set()
-    for group, key in enumerate(best.keys):
-        result = loop.runs.cache.get(key) or {}
-        if not result.get("retried_after"):
-            continue
-        finished.add(str(result.get("increments") or ""))
-        for test_id, g in zip(problem.test_ids, problem.test_group, strict=True):
-            if g == group:
-                said[str(test_id)] = str(result["retried_after"])
+    problem = loop.problem
+    results = [loop.runs.cache.get(key) or {} for key in best.keys]  # by condition group
+    said = {
+        str(test_id): str(results[group]["retried_after"])
+        for test_id, group in zip(problem.test_ids, problem.test_group, strict=True)
+        if results[group].get("retried_after")
+    }
     if not said:
         return said, ""
-    how = f" ({', '.join(sorted(finished - {''}))})" if finished - {""} else ""
+    finished = sorted(
+        {str(r["increments"]) for r in results if r.get("retried_after") and r.get("increments")}
+    )
+    how = f" ({', '.join(finished)})" if finished else ""
     return said, (
         f"; {problem.spec.solver} finished test(s) {', '.join(said)} at this point only "
         f"after a retry{how}: near such points its curves move by a few per cent between "
