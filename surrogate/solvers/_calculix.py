@@ -8,6 +8,14 @@ The deck (after ``shared/calculix.md``, a model that converged to 90°):
   occupies the outer Tcoat of its face, as in the built-in solver (design.md
   §3), elastic + ``*PLASTIC`` (ν = 0; an elastic coat gets a huge yield stress,
   since plain ``*ELASTIC`` under NLGEOM is St. Venant–Kirchhoff and softer);
+- Scoat is a nominal (engineering) yield stress, as in the built-in rod: ccx's
+  ``*PLASTIC`` takes true stress against true plastic strain, and a flat true stress
+  under NLGEOM lets the plastic coat's section shrink as it stretches, so the tensile
+  coat at the clamp necked in the first element (Considère): its strain jumped from
+  15 % to 140 % and the force snapped down by 20 % between 52° and 60° at a thick
+  soft coat at 10 mm, at an angle that moved with the increments and the coating.
+  The table (:func:`plastic_table`) holds the nominal stress at Scoat (+ the
+  hardening), true stress ``(Scoat + H·εp)·exp(εp)``, and the curve is smooth there;
 - an orthotropic core, soft in the strip plane (1 MPa) but stiff through the
   thickness and in transverse shear (2000 MPa), so the sandwich bends like the
   built-in rod without the probe crushing it;
@@ -82,11 +90,13 @@ __all__ = [
     "CalculixSolver",
     "calculix_deck",
     "parse_calculix_dat",
+    "plastic_table",
 ]
 
 SLICE_WIDTH_MM = 0.2
-DECK_VERSION = "ccx-deck-9"
-"""Bump whenever a change to the deck changes results (it keys the cache). 9: a retry
+DECK_VERSION = "ccx-deck-11"
+"""Bump whenever a change to the deck changes results (it keys the cache). 11: Scoat a
+nominal yield stress (:func:`plastic_table`; 10 was tried and reverted); 9: a retry
 with fixed increments of half the size before the automatic ones; 8: a stall
 judged on the whole ``.cvg``; 7: fixed increments on the coarse mesh; 6: contact
 without ccx's random part (``alea = 0``)."""
@@ -95,6 +105,9 @@ RETRY_INCREMENT = 0.5  # a retry's increment (fixed; automatic: largest), of the
 MAX_ITERATIONS = 200  # in one attempt of one increment: a fixed increment's contact has
 # flipped (automatic increments stop at the deck's 30; fixed ones converged in 3–8)
 JOB = "bending"
+PLASTIC_STRAINS = (0.0, 0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0, 1.5, 2.0)
+"""True plastic strains of the coat's ``*PLASTIC`` table (ccx interpolates linearly in
+between, a chord above the exponential: 0.1 % at 0.25, and holds the last stress)."""
 
 
 @dataclass(frozen=True)
@@ -287,18 +300,12 @@ class _Deck:
 
     def _materials(self) -> list[str]:
         state = self.state
-        yield_mpa = state.scoat_mpa
-        ratio = state.hardening_ratio
-        plastic = [f"{yield_mpa:.9g}, 0."]
-        if ratio > 0.0:  # linear hardening: H = E·ratio/(1 − ratio) against plastic strain
-            modulus = state.ecoat_mpa * ratio / (1.0 - ratio)
-            plastic.append(f"{yield_mpa + modulus:.9g}, 1.")
         return [
             "*MATERIAL, NAME=COAT",
             "*ELASTIC",
             f"{state.ecoat_mpa:.9g}, 0.",
             "*PLASTIC",
-            *plastic,
+            *(f"{stress:.9g}, {strain:g}" for stress, strain in plastic_table(state)),
             "*MATERIAL, NAME=CORE",
             "*ELASTIC, TYPE=ENGINEERING CONSTANTS",
             "1., 1., 2000., 0., 0., 0., 0.5, 2000.",
@@ -390,6 +397,21 @@ class _Deck:
             for j, k in middles:
                 loads[self.node_id(i, j, k)] = loads.get(self.node_id(i, j, k), 0.0) + share / 3
         return ["*CLOAD"] + [f"{node}, 1, {value:.9g}" for node, value in sorted(loads.items())]
+
+
+def plastic_table(state: ModelState) -> list[tuple[float, float]]:
+    """The coat's ``*PLASTIC`` rows (true stress [MPa], true plastic strain) for a
+    nominal yield stress: ``(Scoat + H·εp)·exp(εp)`` at ``PLASTIC_STRAINS``, with the
+    linear hardening ``H = Ecoat·ratio/(1 − ratio)`` against plastic strain. Plastic
+    flow keeps the volume (the elastic part has ν = 0), so a section stretched by
+    ``exp(εp)`` shrinks by as much and carries ``Scoat + H·εp`` per unit of its
+    undeformed area: the stretched coat does not neck, as the rod's does not."""
+    ratio = state.hardening_ratio
+    modulus = state.ecoat_mpa * ratio / (1.0 - ratio) if ratio > 0.0 else 0.0
+    return [
+        ((state.scoat_mpa + modulus * strain) * math.exp(strain), strain)
+        for strain in PLASTIC_STRAINS
+    ]
 
 
 def _node_line(node: int, x: float, y: float, z: float) -> str:

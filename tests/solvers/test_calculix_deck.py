@@ -74,7 +74,12 @@ def test_layers_follow_the_coat_core_coat_section():
 def test_materials_contact_and_step_carry_the_inputs():
     blocks = _blocks(calculix_deck(STATE, mesh="coarse"))
     assert blocks["*ELASTIC"][0] == "1000, 0."  # Ecoat [MPa], ν = 0
-    assert blocks["*PLASTIC"] == ["200, 0."]  # Scoat, ideal plastic
+    # Scoat a nominal yield stress: true stress Scoat·exp(εp), so a stretched coat's
+    # shrinking section carries Scoat per undeformed area and does not neck
+    rows = [[float(v) for v in line.split(",")] for line in blocks["*PLASTIC"]]
+    stress, strain = np.array(rows).T
+    assert strain[0] == 0.0 and strain[-1] >= 2.0 and np.all(np.diff(strain) > 0.0)
+    assert stress * np.exp(-strain) == pytest.approx(200.0, rel=1e-8)
     assert blocks["*FRICTION"] == ["0.1, 100"]  # μ, stick slope K/10
     assert blocks["*SURFACE BEHAVIOR, PRESSURE-OVERCLOSURE=LINEAR"] == ["1000"]
     rotation = [line for line in blocks["*BOUNDARY"] if line.endswith(f"{-math.pi / 2:.12g}")]
@@ -95,8 +100,10 @@ def test_materials_contact_and_step_carry_the_inputs():
 def test_hardening_friction_and_end_load_options():
     state = ModelState(1000.0, 200.0, 0.012, Rig(friction=0.0, tension_n=19.0), 0.05)
     blocks = _blocks(calculix_deck(state, mesh="coarse"))
-    # linear hardening: H = E·r/(1 − r) against plastic strain
-    assert blocks["*PLASTIC"] == ["200, 0.", f"{200 + 1000 * 0.05 / 0.95:.9g}, 1."]
+    # linear hardening: nominal stress Scoat + H·εp, H = E·r/(1 − r)
+    rows = [[float(v) for v in line.split(",")] for line in blocks["*PLASTIC"]]
+    stress, strain = np.array(rows).T
+    assert stress * np.exp(-strain) == pytest.approx(200 + 1000 * 0.05 / 0.95 * strain, rel=1e-8)
     assert "*FRICTION" not in blocks
     loads = [float(line.split(",")[2]) for line in blocks["*CLOAD"]]
     assert sum(loads) == pytest.approx(19.0 * SLICE_WIDTH_MM / 38.0)  # the slice's share
