@@ -70,7 +70,7 @@ def test_a_thick_soft_coat_bends_smoothly_in_the_coating(ccx, tmp_path):
     """The built-in optimum of the *mid* calibration (a thick soft coat, 10 mm). With a
     flat true yield stress the tensile coat necked in the clamp's first element near
     55° (strain 15 → 140 %) and the force snapped down by 20 % there, at an angle the
-    increments and the coating moved: neighbours 0.04 % away were 5–9 % apart at 60°,
+    increments and the coating moved: neighbours 0.04 % away were 4–5 % apart at 60°,
     and the deck's own increments stopped at 85.5°. With Scoat a nominal yield stress
     (``plastic_table``) the curve reaches 90° with the deck's own increments, does not
     drop, and a coat 1 % thicker moves it by about 1 % (measured: 0.88–0.95 % from
@@ -95,7 +95,7 @@ def test_a_thick_soft_coat_bends_smoothly_in_the_coating(ccx, tmp_path):
     force = np.array(base["force_n"])
     assert np.all(np.diff(force[30:]) > -0.01 * force[30:-1])  # no snap (deck 9: −20 %)
     change = np.array(moved["force_n"])[30:] / force[30:] - 1.0
-    assert np.all((change > 0.002) & (change < 0.02))  # in proportion (deck 9: 5–9 %)
+    assert np.all((change > 0.002) & (change < 0.02))  # in proportion (deck 9: 4–5 % at 0.04 %)
 
 
 def test_timeout_is_a_failed_run(ccx, tmp_path):
