@@ -36,10 +36,12 @@ The deck (after ``shared/calculix.md``, a model that converged to 90°):
   a coat 0.1 % thicker took other cutbacks and its curve moved as much as one 1 %
   thicker (RMS/ε 40 N against 7.4 N), which finite differences and a trust region
   read as gradient; with fixed increments the curve changes in proportion;
-- a run that does not reach the angle is run again, first with fixed increments of
-  ``RETRY_INCREMENT`` of the mesh's (where fixed ones were used: the curve stays one of
-  fixed increments, a few per cent from the first attempt's, not an automatic
-  attempt's cutbacks), then with automatic increments, then with at most
+- a run that does not reach the angle is run again, first — where fixed increments
+  were used — with the same increments up to the last angle the first attempt reached
+  and increments of ``RETRY_INCREMENT`` the size from there (one step, the rotation
+  and the end load on one ``*AMPLITUDE``: the curve is the first attempt's up to
+  there, to ccx's tolerance, not a curve of other increments all the way, which lay
+  ~1 % off its neighbours'), then with automatic increments, then with at most
   ``RETRY_INCREMENT`` of the largest increment: ccx stops short when an increment is
   cut below the minimum (seen at 73–87° on the coarse mesh for yielding coats at 10 and
   15 mm), and with fixed increments its contact iterations can flip between two states
@@ -94,8 +96,9 @@ __all__ = [
 ]
 
 SLICE_WIDTH_MM = 0.2
-DECK_VERSION = "ccx-deck-11"
-"""Bump whenever a change to the deck changes results (it keys the cache). 11: Scoat a
+DECK_VERSION = "ccx-deck-12"
+"""Bump whenever a change to the deck changes results (it keys the cache). 12: the first
+retry keeps the first attempt's increments up to where it stopped; 11: Scoat a
 nominal yield stress (:func:`plastic_table`; 10 was tried and reverted); 9: a retry
 with fixed increments of half the size before the automatic ones; 8: a stall
 judged on the whole ``.cvg``; 7: fixed increments on the coarse mesh; 6: contact
@@ -131,8 +134,12 @@ class CalculixMesh:
         Rotation increments of the static step (automatic in between).
     fixed_increment_deg : float or None
         The static step's fixed rotation increment (``*STATIC, DIRECT``); None:
-        automatic increments. Its first retry is fixed too, of ``RETRY_INCREMENT`` the
-        size; the later ones are automatic.
+        automatic increments. Its first retry is fixed too (:func:`_next_attempt`);
+        the later ones are automatic.
+    finer_from_deg : float or None
+        With fixed increments: from this angle on (a multiple of the increment),
+        increments of ``RETRY_INCREMENT`` the size — a retry's, from where the
+        first attempt stopped. None: one size throughout.
     """
 
     element_mm: float
@@ -143,6 +150,7 @@ class CalculixMesh:
     max_increment_deg: float
     initial_increment_deg: float
     fixed_increment_deg: float | None = None
+    finer_from_deg: float | None = None
 
 
 CALCULIX_MESHES = {
@@ -278,6 +286,7 @@ class _Deck:
         lines += self._materials()
         lines += self._constraints(ref, rot)
         lines += self._contact()
+        lines += self._amplitude(self.rig.max_angle_deg)
         lines += self._step(rot)
         return "\n".join(lines) + "\n"
 
@@ -357,7 +366,7 @@ class _Deck:
             "*CONTROLS, PARAMETERS=CONTACT",
             CONTACT_CONTROLS,
             *self._static(span),
-            "*BOUNDARY",
+            f"*BOUNDARY{self._on_amplitude(span)}",
             f"{rot}, 2, 2, {-math.radians(span):.12g}",
         ]
         lines += self._end_load()
@@ -370,8 +379,37 @@ class _Deck:
         ]
         return lines
 
+    def _split(self, span: float) -> tuple[int, int] | None:
+        """A retry's fixed increments: how many of the mesh's size up to
+        ``finer_from_deg`` and of ``RETRY_INCREMENT`` the size after it; None: one
+        size throughout."""
+        fixed, start = self.mesh.fixed_increment_deg, self.mesh.finer_from_deg
+        if fixed is None or start is None or not 0.0 < start < span:
+            return None
+        finer = RETRY_INCREMENT * fixed
+        return round(start / fixed), math.ceil((span - start) / finer - 1e-9)
+
+    def _amplitude(self, span: float) -> list[str]:
+        """The rotation (and end load) against step time where the increments change
+        size: every increment is one step-time unit of ``*STATIC, DIRECT``."""
+        split = self._split(span)
+        if split is None:
+            return []
+        first, rest = split
+        start = self.mesh.finer_from_deg
+        return [
+            "*AMPLITUDE, NAME=ROTATION",
+            f"0., 0., {first / (first + rest):.12g}, {start / span:.12g}, 1., 1.",
+        ]
+
+    def _on_amplitude(self, span: float) -> str:
+        return "" if self._split(span) is None else ", AMPLITUDE=ROTATION"
+
     def _static(self, span: float) -> list[str]:
         mesh = self.mesh
+        split = self._split(span)
+        if split is not None:
+            return ["*STATIC, DIRECT", f"{1.0 / sum(split):.12g}, 1."]
         if mesh.fixed_increment_deg is not None:
             return ["*STATIC, DIRECT", f"{min(mesh.fixed_increment_deg, span) / span:.9g}, 1."]
         return [
@@ -396,7 +434,8 @@ class _Deck:
                 loads[self.node_id(i, j, k)] = loads.get(self.node_id(i, j, k), 0.0) - share / 12
             for j, k in middles:
                 loads[self.node_id(i, j, k)] = loads.get(self.node_id(i, j, k), 0.0) + share / 3
-        return ["*CLOAD"] + [f"{node}, 1, {value:.9g}" for node, value in sorted(loads.items())]
+        cload = f"*CLOAD{self._on_amplitude(self.rig.max_angle_deg)}"  # with the rotation
+        return [cload] + [f"{node}, 1, {value:.9g}" for node, value in sorted(loads.items())]
 
 
 def plastic_table(state: ModelState) -> list[tuple[float, float]]:
@@ -575,8 +614,10 @@ class CalculixSolver(Solver):
     def _solve(self, inputs: Mapping[str, Any]) -> dict[str, Any]:
         settings = self.check_settings(inputs.get("solver_settings") or {})
         state = model_state(inputs)
+        mesh = CALCULIX_MESHES[settings.get("mesh", "coarse")]
         reasons: list[str] = []
-        for attempt in _attempts(CALCULIX_MESHES[settings.get("mesh", "coarse")]):
+        attempt: CalculixMesh | None = mesh
+        while attempt is not None:
             result = self._attempt(state, attempt, settings)
             if result.get("status") != "failed":  # a timeout raises: not retried
                 return {
@@ -586,6 +627,7 @@ class CalculixSolver(Solver):
                 }
             said = "with" if not reasons else "again with"
             reasons.append(f"{said} {_increments(attempt)}: {result['reason']}")
+            attempt = _next_attempt(mesh, attempt, result["reached_deg"])
         return failed_result("; ".join(reasons))
 
     def _attempt(
@@ -620,31 +662,51 @@ class CalculixSolver(Solver):
         history = parse_calculix_dat(text)
         if why is not None:
             reached = -math.degrees(history.rotation_rad[-1]) if history.time.size else 0.0
-            return failed_result(f"{why} (last converged {reached:.2f}°)")
+            return {
+                **failed_result(f"{why} (last converged {reached:.2f}°)"),
+                "reached_deg": reached,
+            }
         return _curve(history, state)
 
 
-def _attempts(mesh: CalculixMesh) -> list[CalculixMesh]:
-    """The decks a run tries in turn: the mesh's own; where it has fixed increments,
-    fixed ones of ``RETRY_INCREMENT`` the size; then automatic increments, then automatic
-    ones of at most ``RETRY_INCREMENT`` of the largest."""
+def _next_attempt(
+    mesh: CalculixMesh, last: CalculixMesh, reached_deg: float
+) -> CalculixMesh | None:
+    """The deck a run tries after ``last`` stopped at ``reached_deg`` (None: none is
+    left). After the mesh's own fixed increments: the same ones up to the last whole
+    increment reached and ``RETRY_INCREMENT`` the size from there (from the start
+    where not even one was reached); after fixed ones, automatic increments; after
+    those, automatic ones of at most ``RETRY_INCREMENT`` of the largest."""
+    automatic = replace(mesh, fixed_increment_deg=None, finer_from_deg=None)
     fixed = mesh.fixed_increment_deg
-    automatic = replace(mesh, fixed_increment_deg=None)
-    smaller = replace(
-        automatic,
-        max_increment_deg=RETRY_INCREMENT * mesh.max_increment_deg,
-        initial_increment_deg=min(
-            mesh.initial_increment_deg, RETRY_INCREMENT * mesh.max_increment_deg
-        ),
-    )
-    if fixed is None:
-        return [automatic, smaller]
-    return [mesh, replace(mesh, fixed_increment_deg=RETRY_INCREMENT * fixed), automatic, smaller]
+    if last == mesh and fixed is not None:
+        # the history's rotation is the imposed one to ~1e-5 of an increment
+        start = fixed * math.floor(reached_deg / fixed + 1e-3)
+        if start > 0.0:
+            return replace(mesh, finer_from_deg=start)
+        return replace(mesh, fixed_increment_deg=RETRY_INCREMENT * fixed)
+    if last.fixed_increment_deg is not None:
+        return automatic
+    if last == automatic:
+        return replace(
+            automatic,
+            max_increment_deg=RETRY_INCREMENT * mesh.max_increment_deg,
+            initial_increment_deg=min(
+                mesh.initial_increment_deg, RETRY_INCREMENT * mesh.max_increment_deg
+            ),
+        )
+    return None
 
 
 def _increments(mesh: CalculixMesh) -> str:
-    if mesh.fixed_increment_deg is not None:
-        return f"fixed increments of {mesh.fixed_increment_deg:g}°"
+    fixed = mesh.fixed_increment_deg
+    if fixed is not None and mesh.finer_from_deg is not None:
+        return (
+            f"fixed increments of {fixed:g}° to {mesh.finer_from_deg:g}°, "
+            f"then {RETRY_INCREMENT * fixed:g}°"
+        )
+    if fixed is not None:
+        return f"fixed increments of {fixed:g}°"
     return f"automatic increments of at most {mesh.max_increment_deg:g}°"
 
 

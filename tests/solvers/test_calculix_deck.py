@@ -2,6 +2,7 @@
 
 import math
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,7 @@ from surrogate.solvers._calculix import (
     SLICE_WIDTH_MM,
     _curve,
     _Deck,
+    _next_attempt,
     ccx_failure,
     stalled_increment,
 )
@@ -109,6 +111,36 @@ def test_hardening_friction_and_end_load_options():
     assert sum(loads) == pytest.approx(19.0 * SLICE_WIDTH_MM / 38.0)  # the slice's share
 
 
+def test_a_retry_keeps_the_first_attempts_increments_up_to_where_it_stopped():
+    """After the mesh's fixed increments stopped at 88.87° (ccx's rotation of the 79th
+    increment, a hair under 79 × 1.125°): one step, 79 increments of 1.125° and 2 of
+    0.5625°, each one step-time unit of ``DIRECT``; rotation and end load on one
+    amplitude, so each reaches at every increment what it reached in the first attempt."""
+    coarse = CALCULIX_MESHES["coarse"]
+    retry = _next_attempt(coarse, coarse, 88.87497865)
+    assert retry == replace(coarse, finer_from_deg=88.875)
+    state = ModelState(1000.0, 200.0, 0.012, Rig(tension_n=19.0))
+    blocks = _blocks(calculix_deck(state, mesh=retry))
+    steps = 79 + 2
+    assert float(blocks["*STATIC, DIRECT"][0].split(",")[0]) == pytest.approx(1 / steps)
+    times, values = (
+        np.array([float(v) for v in blocks["*AMPLITUDE, NAME=ROTATION"][0].split(",")])
+        .reshape(3, 2)
+        .T
+    )
+    assert times == pytest.approx([0.0, 79 / steps, 1.0])
+    assert values == pytest.approx([0.0, 88.875 / 90.0, 1.0])
+    assert "*BOUNDARY, AMPLITUDE=ROTATION" in blocks and "*CLOAD, AMPLITUDE=ROTATION" in blocks
+    assert "*AMPLITUDE" not in calculix_deck(state, mesh=coarse)  # the deck's own: none
+    # where not one increment was reached, the retry is half the size from the start
+    assert _next_attempt(coarse, coarse, 0.5) == replace(coarse, fixed_increment_deg=0.5625)
+    after = [_next_attempt(coarse, retry, 50.0)]
+    after.append(_next_attempt(coarse, after[0], 50.0))
+    assert [m.fixed_increment_deg for m in after] == [None, None]
+    assert [m.max_increment_deg for m in after] == [3.0, 1.5]
+    assert _next_attempt(coarse, after[1], 50.0) is None
+
+
 def test_bad_mesh_and_unsupported_effect_are_input_errors():
     with pytest.raises(InputDataError, match="mesh must be one of"):
         calculix_deck(STATE, mesh="medium")
@@ -174,10 +206,11 @@ def test_ccx_stopping_is_a_failed_run_with_its_reason(tmp_path, monkeypatch, exi
     assert result["status"] == "failed"
     # the 10th block
     stopped = "ccx did not reach 90°: *ERROR: too many cutbacks (last converged 26.25°)"
-    # The stand-in stops the same way when retried: every attempt's reason named.
+    # The stand-in stops the same way when retried: every attempt's reason named. The
+    # first retry keeps 1.125° up to the last whole increment reached (23 × 1.125°).
     assert result["reason"] == (
         f"with fixed increments of 1.125°: {stopped}; "
-        f"again with fixed increments of 0.5625°: {stopped}; "
+        f"again with fixed increments of 1.125° to 25.875°, then 0.5625°: {stopped}; "
         f"again with automatic increments of at most 3°: {stopped}; "
         f"again with automatic increments of at most 1.5°: {stopped}"
     )

@@ -17,7 +17,13 @@ from surrogate import Rig
 from surrogate.identify._loop import run
 from surrogate.physics import curve_features
 from surrogate.solvers._batch import solve_inputs, solver_inputs
-from surrogate.solvers._calculix import CALCULIX_MESHES, RETRY_INCREMENT
+from surrogate.solvers._calculix import (
+    CALCULIX_MESHES,
+    RETRY_INCREMENT,
+    _curve,
+    parse_calculix_dat,
+)
+from surrogate.solvers._state import model_state
 
 pytestmark = [pytest.mark.calculix, pytest.mark.slow]
 
@@ -236,6 +242,60 @@ def test_a_run_stopped_short_is_retried_with_half_the_fixed_increment(ccx, tmp_p
     assert result["retried_after"].startswith("with fixed increments of 1.125°: ")
     assert result["angle_deg"][-1] == 30.0
     assert np.all(np.isfinite(result["force_n"])) and max(result["force_n"]) > 0.0
+
+
+STOPPING_CCX = """#!{python}
+# the real ccx; on the first deck (no *AMPLITUDE) its .dat is cut after {keep}
+# increments and the run reported as stopped there, as ccx reports a divergence
+import re, shutil, subprocess, sys
+from pathlib import Path
+done = subprocess.run([{ccx!r}, *sys.argv[1:]], capture_output=True, text=True)
+if "*AMPLITUDE" in Path("bending.inp").read_text():
+    print(done.stdout)
+    sys.exit(done.returncode)
+shutil.copy("bending.dat", {first!r})
+times, kept = [], []
+for line in Path("bending.dat").read_text().splitlines():
+    match = re.search(r"and time\\s+(\\S+)", line)
+    if match and match.group(1) not in times:
+        times.append(match.group(1))
+    if len(times) > {keep}:
+        break
+    kept.append(line)
+Path("bending.dat").write_text("\\n".join(kept) + "\\n")
+print(" *ERROR: solution seems to diverge; please try")
+"""
+
+
+def test_a_retry_is_the_first_attempt_up_to_where_it_stopped(ccx, tmp_path):
+    """The first attempt (real ccx) is reported stopped after 16 increments (18°); the
+    retry keeps 1.125° up to 18° and takes 0.5625° from there, in one step with the
+    rotation and the end load on one amplitude, so up to 18° its curve is the first
+    attempt's (to ccx's tolerance; measured 2e-4 of the force at the paper coat).
+    20 N of end tension: were the load on step time, the retry's would lag its
+    rotation (16 of 38 step-time units at 18° against 18 of 30°). 30° keeps it ~35 s."""
+    import sys
+
+    rig = Rig(max_angle_deg=30.0, tension_n=20.0)
+    first = tmp_path / "first.dat"
+    script = tmp_path / "stopping-ccx"
+    script.write_text(
+        STOPPING_CCX.format(python=sys.executable, ccx=ccx, keep=16, first=str(first))
+    )
+    script.chmod(0o755)
+    settings = {"mesh": "coarse", "timeout_s": 900, "command": str(script)}
+    inputs = solver_inputs(POINT, rig, solver="calculix", solver_settings=settings)
+    result = solve_inputs(inputs)
+    assert result["status"] == "ok", result["reason"]
+    assert result["increments"] == "fixed increments of 1.125° to 18°, then 0.5625°"
+    assert result["retried_after"] == (
+        "with fixed increments of 1.125°: ccx did not reach 30°: *ERROR: solution seems "
+        "to diverge; please try (last converged 18.00°)"
+    )
+    assert result["angle_deg"][-1] == 30.0
+    whole = _curve(parse_calculix_dat(first.read_text()), model_state(inputs))
+    assert whole["angle_deg"][-1] == 30.0  # the first attempt did reach the end
+    np.testing.assert_allclose(result["force_n"][:19], whole["force_n"][:19], rtol=2e-3)
 
 
 def test_a_run_stopped_short_is_retried_with_smaller_increments(ccx, tmp_path):
