@@ -3,7 +3,8 @@ the main loop (``surrogate run``) end to end with ``kind = "calculix"`` (the bui
 solver its prior).
 
 Marked ``calculix``: they need ``ccx`` (skipped without it on a user's machine,
-a failure in CI). About 2–3 minutes on 2 shared cores.
+a failure in CI). 6.5 minutes in one process beside two other ccx runs (2-core AMD
+EPYC, 2026-11-25); less with ``-n 2`` on a quiet machine.
 """
 
 from concurrent.futures import ThreadPoolExecutor
