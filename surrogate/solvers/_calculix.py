@@ -392,11 +392,10 @@ class _Deck:
     def _amplitude(self, span: float) -> list[str]:
         """The rotation (and end load) against step time where the increments change
         size: every increment is one step-time unit of ``*STATIC, DIRECT``."""
-        split = self._split(span)
-        if split is None:
+        split, start = self._split(span), self.mesh.finer_from_deg
+        if split is None or start is None:
             return []
         first, rest = split
-        start = self.mesh.finer_from_deg
         return [
             "*AMPLITUDE, NAME=ROTATION",
             f"0., 0., {first / (first + rest):.12g}, {start / span:.12g}, 1., 1.",
