@@ -40,6 +40,20 @@ def _blocks(deck: str) -> dict[str, list[str]]:
     return blocks
 
 
+def _coat_tables(deck: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Coat material name → its ``*PLASTIC`` (true stress, true plastic strain) columns."""
+    tables: dict[str, list[list[float]]] = {}
+    material, rows = None, None
+    for line in deck.splitlines():
+        if line.startswith("*MATERIAL, NAME="):
+            material, rows = line.split("=", 1)[1], None
+        elif line.startswith("*"):
+            rows = tables.setdefault(material, []) if line == "*PLASTIC" else None
+        elif rows is not None:
+            rows.append([float(v) for v in line.split(",")])
+    return {name: tuple(np.array(rows).T) for name, rows in tables.items()}
+
+
 def _signed_volume(corners: np.ndarray) -> float:
     """Triple product of the edges 1-2, 1-4, 1-5 of a brick (positive: valid ordering)."""
     return float(np.dot(np.cross(corners[1] - corners[0], corners[3] - corners[0]),
@@ -77,11 +91,12 @@ def test_materials_contact_and_step_carry_the_inputs():
     blocks = _blocks(calculix_deck(STATE, mesh="coarse"))
     assert blocks["*ELASTIC"][0] == "1000, 0."  # Ecoat [MPa], ν = 0
     # Scoat a nominal yield stress: true stress Scoat·exp(εp), so a stretched coat's
-    # shrinking section carries Scoat per undeformed area and does not neck
-    rows = [[float(v) for v in line.split(",")] for line in blocks["*PLASTIC"]]
-    stress, strain = np.array(rows).T
-    assert strain[0] == 0.0 and strain[-1] >= 2.0 and np.all(np.diff(strain) > 0.0)
-    assert stress * np.exp(-strain) == pytest.approx(200.0, rel=1e-8)
+    # shrinking section carries Scoat per undeformed area and does not neck; each coat
+    # has its material (TABLE_GROWTH), the same table in the deck
+    for coat, (stress, strain) in _coat_tables(calculix_deck(STATE, mesh="coarse")).items():
+        assert f"*SOLID SECTION, ELSET={coat}, MATERIAL={coat}" in blocks
+        assert strain[0] == 0.0 and strain[-1] >= 2.0 and np.all(np.diff(strain) > 0.0)
+        assert stress * np.exp(-strain) == pytest.approx(200.0, rel=1e-8)
     assert blocks["*FRICTION"] == ["0.1, 100"]  # μ, stick slope K/10
     assert blocks["*SURFACE BEHAVIOR, PRESSURE-OVERCLOSURE=LINEAR"] == ["1000"]
     rotation = [line for line in blocks["*BOUNDARY"] if line.endswith(f"{-math.pi / 2:.12g}")]
@@ -103,9 +118,11 @@ def test_hardening_friction_and_end_load_options():
     state = ModelState(1000.0, 200.0, 0.012, Rig(friction=0.0, tension_n=19.0), 0.05)
     blocks = _blocks(calculix_deck(state, mesh="coarse"))
     # linear hardening: nominal stress Scoat + H·εp, H = E·r/(1 − r)
-    rows = [[float(v) for v in line.split(",")] for line in blocks["*PLASTIC"]]
-    stress, strain = np.array(rows).T
-    assert stress * np.exp(-strain) == pytest.approx(200 + 1000 * 0.05 / 0.95 * strain, rel=1e-8)
+    tables = _coat_tables(calculix_deck(state, mesh="coarse"))
+    assert sorted(tables) == ["BOTCOAT", "TOPCOAT"]
+    for stress, strain in tables.values():
+        hardened = 200 + 1000 * 0.05 / 0.95 * strain
+        assert stress * np.exp(-strain) == pytest.approx(hardened, rel=1e-8)
     assert "*FRICTION" not in blocks
     loads = [float(line.split(",")[2]) for line in blocks["*CLOAD"]]
     assert sum(loads) == pytest.approx(19.0 * SLICE_WIDTH_MM / 38.0)  # the slice's share
