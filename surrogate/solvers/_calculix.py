@@ -639,7 +639,7 @@ class CalculixSolver(Solver):
                 }
             said = "with" if not reasons else "again with"
             reasons.append(f"{said} {_increments(attempt)}: {result['reason']}")
-            attempt = _next_attempt(mesh, attempt, result["reached_deg"])
+            attempt = _next_attempt(mesh, attempt, result["reached_deg"], state.rig.max_angle_deg)
         return failed_result("; ".join(reasons))
 
     def _attempt(
@@ -682,18 +682,22 @@ class CalculixSolver(Solver):
 
 
 def _next_attempt(
-    mesh: CalculixMesh, last: CalculixMesh, reached_deg: float
+    mesh: CalculixMesh, last: CalculixMesh, reached_deg: float, span_deg: float
 ) -> CalculixMesh | None:
-    """The deck a run tries after ``last`` stopped at ``reached_deg`` (None: none is
-    left). After the mesh's own fixed increments: the same ones up to the last whole
-    increment reached and ``RETRY_INCREMENT`` the size from there (from the start
-    where not even one was reached); after fixed ones, automatic increments; after
-    those, automatic ones of at most ``RETRY_INCREMENT`` of the largest."""
+    """The deck a run tries after ``last`` stopped at ``reached_deg`` of ``span_deg``
+    (None: none is left). After the mesh's own fixed increments: the same ones up to
+    the last whole increment reached and ``RETRY_INCREMENT`` the size from there (from
+    the start where not even one was reached; automatic increments where the whole span
+    was reached and the last increment still failed, as the same deck would again);
+    after fixed ones, automatic increments; after those, automatic ones of at most
+    ``RETRY_INCREMENT`` of the largest."""
     automatic = replace(mesh, fixed_increment_deg=None, finer_from_deg=None)
     fixed = mesh.fixed_increment_deg
     if last == mesh and fixed is not None:
         # the history's rotation is the imposed one to ~1e-5 of an increment
         start = fixed * math.floor(reached_deg / fixed + 1e-3)
+        if start >= span_deg - 1e-6 * fixed:
+            return automatic
         if start > 0.0:
             return replace(mesh, finer_from_deg=start)
         return replace(mesh, fixed_increment_deg=RETRY_INCREMENT * fixed)

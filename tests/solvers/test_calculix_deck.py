@@ -134,7 +134,7 @@ def test_a_retry_keeps_the_first_attempts_increments_up_to_where_it_stopped():
     0.5625°, each one step-time unit of ``DIRECT``; rotation and end load on one
     amplitude, so each reaches at every increment what it reached in the first attempt."""
     coarse = CALCULIX_MESHES["coarse"]
-    retry = _next_attempt(coarse, coarse, 88.87497865)
+    retry = _next_attempt(coarse, coarse, 88.87497865, 90.0)
     assert retry == replace(coarse, finer_from_deg=88.875)
     state = ModelState(1000.0, 200.0, 0.012, Rig(tension_n=19.0))
     blocks = _blocks(calculix_deck(state, mesh=retry))
@@ -150,12 +150,16 @@ def test_a_retry_keeps_the_first_attempts_increments_up_to_where_it_stopped():
     assert "*BOUNDARY, AMPLITUDE=ROTATION" in blocks and "*CLOAD, AMPLITUDE=ROTATION" in blocks
     assert "*AMPLITUDE" not in calculix_deck(state, mesh=coarse)  # the deck's own: none
     # where not one increment was reached, the retry is half the size from the start
-    assert _next_attempt(coarse, coarse, 0.5) == replace(coarse, fixed_increment_deg=0.5625)
-    after = [_next_attempt(coarse, retry, 50.0)]
-    after.append(_next_attempt(coarse, after[0], 50.0))
+    assert _next_attempt(coarse, coarse, 0.5, 90.0) == replace(coarse, fixed_increment_deg=0.5625)
+    # where it reached the end and its last increment still failed, the same increments
+    # would fail again: automatic ones next
+    assert _next_attempt(coarse, coarse, 89.99999, 90.0).fixed_increment_deg is None
+    assert _next_attempt(coarse, coarse, 89.99999, 90.0) == _next_attempt(coarse, retry, 1, 90)
+    after = [_next_attempt(coarse, retry, 50.0, 90.0)]
+    after.append(_next_attempt(coarse, after[0], 50.0, 90.0))
     assert [m.fixed_increment_deg for m in after] == [None, None]
     assert [m.max_increment_deg for m in after] == [3.0, 1.5]
-    assert _next_attempt(coarse, after[1], 50.0) is None
+    assert _next_attempt(coarse, after[1], 50.0, 90.0) is None
 
 
 def test_bad_mesh_and_unsupported_effect_are_input_errors():
