@@ -56,9 +56,9 @@ TABLES = {  # name: growth of the (bottom, top) coat's true stress
 KEPT = ("bending_length_mm", "tension_n")  # the conditions that move these curves
 
 
-def cases() -> dict[str, tuple[dict[str, float], dict[str, Any] | None, dict[str, float]]]:
+def cases() -> dict[str, tuple[dict[str, float], dict[str, Any] | None, dict[str, Any]]]:
     """Name → (coating, effects, conditions) at the fidelity benchmark's truths."""
-    found: dict[str, tuple[dict[str, float], dict[str, Any] | None, dict[str, float]]] = {}
+    found: dict[str, tuple[dict[str, float], dict[str, Any] | None, dict[str, Any]]] = {}
     for name, coating in CALIBRATIONS.items():
         for test in TWO_LENGTHS:
             found[f"{name} {test['bending_length_mm']:g} mm"] = (
