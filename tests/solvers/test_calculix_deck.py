@@ -10,7 +10,7 @@ import pytest
 
 from surrogate import InputDataError, Rig
 from surrogate.effects import ModelState
-from surrogate.solvers import CALCULIX_MESHES, calculix_deck, parse_calculix_dat
+from surrogate.solvers import CALCULIX_MESHES, _calculix, calculix_deck, parse_calculix_dat
 from surrogate.solvers._calculix import (
     MAX_ITERATIONS,
     SLICE_WIDTH_MM,
@@ -126,6 +126,17 @@ def test_hardening_friction_and_end_load_options():
     assert "*FRICTION" not in blocks
     loads = [float(line.split(",")[2]) for line in blocks["*CLOAD"]]
     assert sum(loads) == pytest.approx(19.0 * SLICE_WIDTH_MM / 38.0)  # the slice's share
+
+
+def test_each_coat_takes_its_own_table_growth(monkeypatch):
+    """``TABLE_GROWTH`` (what ``benchmarks/calculix_gap.py`` varies): growth 0 is a flat
+    true stress, 1 a nominal Scoat in tension, per coat."""
+    monkeypatch.setattr(_calculix, "TABLE_GROWTH", {"BOTCOAT": 0.0, "TOPCOAT": 1.0})
+    tables = _coat_tables(calculix_deck(STATE, mesh="coarse"))
+    bottom, top = tables["BOTCOAT"], tables["TOPCOAT"]
+    assert bottom[0] == pytest.approx(200.0, rel=1e-8)
+    assert top[0] * np.exp(-top[1]) == pytest.approx(200.0, rel=1e-8)
+    assert top[0][-1] > 7 * bottom[0][-1]  # exp(2) at εp = 2
 
 
 def test_a_retry_keeps_the_first_attempts_increments_up_to_where_it_stopped():
