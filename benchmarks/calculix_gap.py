@@ -82,9 +82,9 @@ def cases() -> dict[str, tuple[dict[str, float], dict[str, Any] | None, dict[str
 def _run(task: tuple[str, str]) -> dict[str, Any]:
     case, table = task
     coating, effects, conditions = cases()[case]
-    kind = "builtin" if table == "builtin" else SOLVER["kind"]
-    settings = {"mesh": SOLVER["mesh"]} if kind == SOLVER["kind"] else None
-    if kind == SOLVER["kind"]:
+    kind, settings = "builtin", None
+    if table != "builtin":
+        kind, settings = SOLVER["kind"], {"mesh": SOLVER["mesh"]}
         bottom, top = TABLES[table]
         _calculix.TABLE_GROWTH = {"BOTCOAT": bottom, "TOPCOAT": top}  # this process only
     inputs = solver_inputs(

@@ -88,12 +88,13 @@ def test_layers_follow_the_coat_core_coat_section():
 
 
 def test_materials_contact_and_step_carry_the_inputs():
-    blocks = _blocks(calculix_deck(STATE, mesh="coarse"))
+    deck = calculix_deck(STATE, mesh="coarse")
+    blocks = _blocks(deck)
     assert blocks["*ELASTIC"][0] == "1000, 0."  # Ecoat [MPa], ν = 0
     # Scoat a nominal yield stress: true stress Scoat·exp(εp), so a stretched coat's
     # shrinking section carries Scoat per undeformed area and does not neck; each coat
     # has its material (TABLE_GROWTH), the same table in the deck
-    for coat, (stress, strain) in _coat_tables(calculix_deck(STATE, mesh="coarse")).items():
+    for coat, (stress, strain) in _coat_tables(deck).items():
         assert f"*SOLID SECTION, ELSET={coat}, MATERIAL={coat}" in blocks
         assert strain[0] == 0.0 and strain[-1] >= 2.0 and np.all(np.diff(strain) > 0.0)
         assert stress * np.exp(-strain) == pytest.approx(200.0, rel=1e-8)
@@ -116,9 +117,10 @@ def test_materials_contact_and_step_carry_the_inputs():
 
 def test_hardening_friction_and_end_load_options():
     state = ModelState(1000.0, 200.0, 0.012, Rig(friction=0.0, tension_n=19.0), 0.05)
-    blocks = _blocks(calculix_deck(state, mesh="coarse"))
+    deck = calculix_deck(state, mesh="coarse")
+    blocks = _blocks(deck)
     # linear hardening: nominal stress Scoat + H·εp, H = E·r/(1 − r)
-    tables = _coat_tables(calculix_deck(state, mesh="coarse"))
+    tables = _coat_tables(deck)
     assert sorted(tables) == ["BOTCOAT", "TOPCOAT"]
     for stress, strain in tables.values():
         hardened = 200 + 1000 * 0.05 / 0.95 * strain
@@ -164,8 +166,9 @@ def test_a_retry_keeps_the_first_attempts_increments_up_to_where_it_stopped():
     assert _next_attempt(coarse, coarse, 0.5, 90.0) == replace(coarse, fixed_increment_deg=0.5625)
     # where it reached the end and its last increment still failed, the same increments
     # would fail again: automatic ones next
-    assert _next_attempt(coarse, coarse, 89.99999, 90.0).fixed_increment_deg is None
-    assert _next_attempt(coarse, coarse, 89.99999, 90.0) == _next_attempt(coarse, retry, 1, 90)
+    ended = _next_attempt(coarse, coarse, 89.99999, 90.0)
+    assert ended.fixed_increment_deg is None
+    assert ended == _next_attempt(coarse, retry, 1, 90)
     after = [_next_attempt(coarse, retry, 50.0, 90.0)]
     after.append(_next_attempt(coarse, after[0], 50.0, 90.0))
     assert [m.fixed_increment_deg for m in after] == [None, None]
