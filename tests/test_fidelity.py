@@ -372,6 +372,7 @@ def test_diagnosis_names_a_hidden_effect_confirming_it_on_the_expensive_solver(
     leader = result.ranking[0]
     assert leader["effect"] == "tension" and leader["confirmed_by"] == "test-distorted"
     assert leader["delta_bic"] < -10 and leader["rmse_n"] <= 1.3 * result.noise_n
+    assert leader["unsettled"] is None  # its calibration reached a verified local optimum
     assert result.verdict.startswith("missing effect: tension")
     mf = result.multi_fidelity
     assert mf["confirmed"] == ["tension"]

@@ -300,6 +300,17 @@ def _multi_fidelity(loop: CalibrationLoop, best: VerifiedPoint) -> dict[str, Any
     )
 
 
+def unconverged_reason(result: CalibrationResult, fit: LocalFit | None) -> str | None:
+    """Why a calibration ended before a verified local optimum (None: it reached one):
+    the local fit's own words where it ended at the reported point."""
+    if result.status == "converged":
+        return None
+    reported = np.array(list(result.params.values()))
+    if fit is not None and np.array_equal(fit.theta, reported):
+        return fit.message
+    return "no local fit ended at the best verified point"
+
+
 def _message(problem: CalibrationProblem, result: CalibrationResult, fit: LocalFit | None) -> str:
     rmse, noise = result.rmse_n, result.noise_n
     text = (
@@ -307,14 +318,8 @@ def _message(problem: CalibrationProblem, result: CalibrationResult, fit: LocalF
         f"{len(problem.test_ids)} tests, noise {noise:.4g} N ({rmse / noise:.2f}× noise), "
         f"{result.solver_calls} solver calls, {result.status}"
     )
-    if result.status != "converged":
-        reported = np.array(list(result.params.values()))
-        reported_is_fit = fit is not None and np.array_equal(fit.theta, reported)
-        why = (
-            fit.message
-            if fit is not None and reported_is_fit
-            else "no local fit ended at the best verified point"
-        )
+    why = unconverged_reason(result, fit)
+    if why is not None:
         return f"{text} ({why}; best verified point so far — raise --budget)"
     assert result.determination is not None
     return (

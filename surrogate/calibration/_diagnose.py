@@ -57,7 +57,12 @@ from ..solvers import get_solver
 from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import quiet_optuna
 from ..storage._storage import open_storage
-from ._calibrate import CalibrationResult, calibration_note, run_calibration
+from ._calibrate import (
+    CalibrationResult,
+    calibration_note,
+    run_calibration,
+    unconverged_reason,
+)
 from ._compare import BANDS, angle_bands
 from ._fidelity import CorrectedCalibration, CorrectedRuns, CurveCorrection
 from ._local import ResidualModel, SolverFailed, local_fit
@@ -528,6 +533,7 @@ class _Refits:
             delta_bic=bic(rss, n_points, len(verified.theta)) - base,
             params=found.params,
             confirmed_by=self.problem.spec.solver,
+            unsettled=unconverged_reason(found, loop.best_fit()),
         )
 
 

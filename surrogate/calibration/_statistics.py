@@ -211,6 +211,9 @@ class Candidate:
     delta_bic: float
     params: dict[str, float]
     confirmed_by: str | None = None  # the expensive solver whose runs the figures are
+    # why that calibration ended before a verified local optimum (None: it reached one,
+    # or the figures are not an expensive calibration's): its RMSE is then an upper bound
+    unsettled: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -243,7 +246,11 @@ def verdict(
     No systematic misfit: nothing needed. Else the best candidate is named when
     :func:`named` holds (with the candidates ``tied_with`` it); when none brings the
     error near the noise, the column the residual follows (``follows``, significant
-    first) is named as unexplained instead.
+    first) is named as unexplained instead — unless the named candidate's calibration
+    ended before a verified local optimum (``unsettled``): its misfit may then be the
+    search's, and whether anything else is missing is said to be open, with what would
+    tell (on CalculiX-made curves with hidden hardening such a calibration stopped at
+    5.9 × noise where CalculiX at the truth gives 1.07 ×: README).
     """
     trail = [f for f in follows if f["significant"]]
     column = trail[0]["covariate"] if trail else None
@@ -258,8 +265,21 @@ def verdict(
         text = _named_text(best, heldout, noise, column, tied_with)
         if best.rmse_n <= NEAR_NOISE * noise:
             return None, text
-        text += "; a misfit remains after it"
+        text += f"; a misfit remains after it ({best.rmse_n / noise:.2g} × noise)"
+        if best.unsettled is not None:
+            return None, text + _unsettled_text(best)
     return _unexplained(rmse, noise, column, trail, text)
+
+
+def _unsettled_text(best: Candidate) -> str:
+    """Why a misfit left after a named effect is not called unexplained."""
+    on = f" on {best.confirmed_by}" if best.confirmed_by else ""
+    return (
+        f", but its calibration{on} did not settle ({best.unsettled}): "
+        "the misfit left may be the search's, so whether another effect is missing is open — "
+        "a calibration with it and a larger `[budget] calibration_solver_calls`, or `surrogate "
+        "compare --params` at values you expect, would tell"
+    )
 
 
 def _named_text(
