@@ -9,7 +9,10 @@ at neighbours — Scoat and Tcoat each scaled by (1 + ε) — at two bending len
 15 mm). Printed per solver: for each repeat, the RMS over angles of its difference from
 the first run [N] and the largest difference over the force [%] (a deterministic solver:
 0); for each neighbour, the same against the base run and that change over ε (a smooth
-response changes in proportion to ε: the ratio stays put as ε shrinks). The built-in
+response changes in proportion to ε: the ratio stays put as ε shrinks). For CalculiX,
+beside each, which attempt each length's run finished with (the result's
+``increments``): a neighbour that finished on another attempt than the base moves by
+the attempts' difference, not by ε's. The built-in
 solver beside it is the smooth, repeatable reference. ``--coat probe`` is a point a
 CalculiX calibration of the *paper* curves verified (Ecoat at its bound, a yielding coat).
 
@@ -33,10 +36,12 @@ sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != 
 
 import numpy as np  # noqa: E402
 
-import surrogate  # noqa: E402
 from benchmarks._machine import machine  # noqa: E402
 from benchmarks.fidelity import CALIBRATIONS, SOLVER  # noqa: E402
-from surrogate import SolverError  # noqa: E402
+from surrogate import Rig, SolverError  # noqa: E402
+from surrogate.solvers import get_solver  # noqa: E402
+from surrogate.solvers._simulate import _checked_inputs  # noqa: E402
+from surrogate.solvers._simulate import _curve as _as_curve  # noqa: E402
 
 EPSILONS = (1e-3, 1e-2)
 COATS = {  # probe: a point CalculiX ran in a calibration of the paper curves (2026-11-25)
@@ -47,19 +52,21 @@ LENGTHS = (10.0, 15.0)
 MOVED = ("scoat_gpa", "tcoat_mm")
 
 
-def _curve(task: tuple[str, dict[str, float], float]) -> np.ndarray:
+def _curve(task: tuple[str, dict[str, float], float]) -> tuple[np.ndarray, str]:
+    """The run's force at whole degrees (NaN where it failed) and which attempt's it is
+    (CalculiX's ``increments``: the deck's own or a retry's; "-" for the built-in)."""
     solver, coat, length = task
-    settings = {"mesh": SOLVER["mesh"]} if solver == SOLVER["kind"] else None
-    try:
-        curve = surrogate.simulate(
-            **coat,
-            conditions={"bending_length_mm": length},
-            solver=solver,
-            solver_settings=settings,
+    settings = {"mesh": SOLVER["mesh"]} if solver == SOLVER["kind"] else {}
+    try:  # simulate()'s own steps, keeping the result's record of its attempt
+        inputs, rig = _checked_inputs(
+            coat, Rig(), solver, None, {"bending_length_mm": length}, settings
         )
-    except SolverError:  # the comparison leaves that coat out
-        return np.full(91, np.nan)
-    return np.interp(np.arange(91.0), curve.angle_deg, curve.force_n, right=np.nan)
+        result = get_solver(solver).run(inputs)
+        curve = _as_curve(result, coat, rig)
+    except SolverError as error:  # the comparison leaves that coat out
+        return np.full(91, np.nan), f"failed: {error}"
+    attempt = str(result.get("increments") or "-")
+    return np.interp(np.arange(91.0), curve.angle_deg, curve.force_n, right=np.nan), attempt
 
 
 def _changes(moved: np.ndarray, base: np.ndarray) -> tuple[float, float]:
@@ -86,16 +93,29 @@ def main() -> None:
     for solver in ("builtin", SOLVER["kind"]):
         tasks = [(solver, coat, length) for _, _, coat in coats for length in LENGTHS]
         with ProcessPoolExecutor(args.jobs) as pool:
-            curves = np.array(list(pool.map(_curve, tasks))).reshape(len(coats), len(LENGTHS), 91)
+            runs = list(pool.map(_curve, tasks))
+        curves = np.array([curve for curve, _ in runs]).reshape(len(coats), len(LENGTHS), 91)
+        attempts = [
+            [runs[i * len(LENGTHS) + j][1] for j in range(len(LENGTHS))] for i in range(len(coats))
+        ]
+        if solver != "builtin":
+            print(f"{solver:9s} {'base':18s} attempts: {_attempts(attempts[0])}")
         for index, ((name, eps, _), moved) in enumerate(zip(coats, curves, strict=True)):
             if index == 0:
                 continue
             rms, largest = _changes(moved, curves[0])
             what = f"repeat {index + 1}" if name == "repeat" else f"{name} ε {eps:.0e}"
             per_eps = f"  RMS/ε {rms / eps:9.3g} N" if eps else ""
+            other = "" if solver == "builtin" else f"  attempts: {_attempts(attempts[index])}"
             print(
-                f"{solver:9s} {what:18s} RMS change {rms:9.3g} N  largest {largest:7.3g} %{per_eps}"
+                f"{solver:9s} {what:18s} RMS change {rms:9.3g} N  largest {largest:7.3g} %"
+                f"{per_eps}{other}"
             )
+
+
+def _attempts(per_length: list[str]) -> str:
+    """Which attempt each bending length's run finished with."""
+    return "; ".join(f"{length:g} mm {a}" for length, a in zip(LENGTHS, per_length, strict=True))
 
 
 if __name__ == "__main__":
