@@ -39,9 +39,8 @@ import numpy as np  # noqa: E402
 from benchmarks._machine import machine  # noqa: E402
 from benchmarks.fidelity import CALIBRATIONS, SOLVER  # noqa: E402
 from surrogate import Rig, SolverError  # noqa: E402
-from surrogate.solvers import get_solver  # noqa: E402
-from surrogate.solvers._simulate import _checked_inputs  # noqa: E402
 from surrogate.solvers._simulate import _curve as _as_curve  # noqa: E402
+from surrogate.solvers._simulate import solve_checked  # noqa: E402
 
 EPSILONS = (1e-3, 1e-2)
 COATS = {  # probe: a point CalculiX ran in a calibration of the paper curves (2026-11-25)
@@ -57,11 +56,10 @@ def _curve(task: tuple[str, dict[str, float], float]) -> tuple[np.ndarray, str]:
     (CalculiX's ``increments``: the deck's own or a retry's; "-" for the built-in)."""
     solver, coat, length = task
     settings = {"mesh": SOLVER["mesh"]} if solver == SOLVER["kind"] else {}
-    try:  # simulate()'s own steps, keeping the result's record of its attempt
-        inputs, rig = _checked_inputs(
+    try:  # simulate()'s own run, keeping the result's record of its attempt
+        result, rig = solve_checked(
             coat, Rig(), solver, None, {"bending_length_mm": length}, settings
         )
-        result = get_solver(solver).run(inputs)
         curve = _as_curve(result, coat, rig)
     except SolverError as error:  # the comparison leaves that coat out
         return np.full(91, np.nan), f"failed: {error}"

@@ -726,11 +726,13 @@ def _print_diagnosis(result: Any) -> None:
         print(f"  fails at {cell['kind']} {cell['name']}: RMSE {cell['rmse_n']:.3g} N")
     follows = [f["covariate"] for f in result.follows if f["significant"]]
     print("residual follows: " + (", ".join(follows) if follows else "nothing recorded"))
+    from .calibration._statistics import ranking_label
+
     print(f"{'added effect':>18} {'RMSE [N]':>9} {'held-out':>9} {'ΔBIC':>8}")
     for entry in result.ranking:
         print(
-            f"{entry['effect']:>18} {entry['rmse_n']:9.4f} {entry['heldout_rmse_n']:9.4g} "
-            f"{entry['delta_bic']:8.1f}"
+            f"{ranking_label(entry):>18} {entry['rmse_n']:9.4f} "
+            f"{entry['heldout_rmse_n']:9.4g} {entry['delta_bic']:8.1f}"
         )
     if result.tied_with:
         tied = ", ".join(result.tied_with)

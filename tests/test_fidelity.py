@@ -387,6 +387,44 @@ def test_diagnosis_names_a_hidden_effect_confirming_it_on_the_expensive_solver(
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize(
+    ("settings", "hidden", "settled"),
+    [
+        # a rough expensive response and 10 runs: the confirmation cannot settle
+        ("rough = 0.02", {"tension": {"k_e": 0.006, "k_s": 0.006}}, False),
+        # hardening hidden too but not a candidate: settled, and truly unexplained
+        ("", {"tension": {"k_e": 0.006, "k_s": 0.006}, "hardening": {"ratio": 0.1}}, True),
+    ],
+)
+def test_a_misfit_after_a_confirmation_is_unexplained_only_where_it_settled(
+    distorted_solver, log_runs, settings, hidden, settled
+):
+    """The leader's confirmation with 10 expensive runs: where it stopped short of a
+    verified local optimum its entry says why (``unsettled``) and the misfit it leaves
+    is open, not "unexplained"; where it reached one, a misfit left is unexplained."""
+    truth = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
+    path = _calibration_study(
+        log_runs / "diag", DIAGNOSIS_TESTS, truth, hidden=hidden, seed=3, settings=settings
+    )
+    text = path.read_text().replace(
+        "calibration_solver_calls = 30", "calibration_solver_calls = 10"
+    )
+    path.write_text(text)
+    result = surrogate.diagnose(path, candidates=["tension", "anisotropy"], progress=False)
+    leader = result.ranking[0]
+    assert leader["effect"] == "tension" and leader["confirmed_by"] == "test-distorted"
+    assert result.verdict.startswith("missing effect: tension")
+    assert leader["rmse_n"] > 1.3 * result.noise_n  # a misfit remains after it
+    if settled:
+        assert leader["unsettled"] is None
+        assert result.unexplained is not None and "write a plug-in effect" in result.verdict
+    else:
+        assert leader["unsettled"].startswith("not at a verified local optimum")
+        assert "whether another effect is missing is open" in result.verdict
+        assert result.unexplained is None and "plug-in" not in result.verdict
+
+
+@pytest.mark.slow
 def test_a_systematic_misfit_of_the_corrected_loop_says_what_it_cannot_rule_out(
     distorted_solver, log_runs
 ):

@@ -1,10 +1,11 @@
 """The diagnosis's verdict: what it may claim from the leader's figures.
 
 A misfit left after a named effect is called unexplained ("write a plug-in effect")
-only where the leader's calibration reached a verified local optimum; where it did not
-(its ``unsettled``), the misfit may be the search's and the verdict says that it is
-open and what would tell (CalculiX-made curves with hidden hardening: the confirmation
-stopped at 5.9 × noise with its budget spent, CalculiX at the truth gives 1.07 ×).
+unless the leader's figures come from a calibration that stopped before a verified
+local optimum (its ``unsettled``, set where an expensive solver confirmed it): they
+are then upper bounds, and the verdict says that whether an effect is missing is open
+and what would tell (README, "Multi-fidelity": CalculiX-made curves with hidden
+hardening, whose confirmation stopped short far from the truth's basin).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import numpy as np
 import pytest
 
 from surrogate.calibration._calibrate import CalibrationResult, unconverged_reason
-from surrogate.calibration._statistics import Candidate, verdict
+from surrogate.calibration._statistics import Candidate, ranking_label, verdict
 
 NOISE = 0.05
 FOLLOWS = [{"covariate": "angle_deg", "significant": True, "p_value": 1e-9}]
@@ -42,7 +43,7 @@ def _verdict(leader: Candidate):
 def test_a_misfit_left_after_a_settled_leader_is_unexplained():
     unexplained, text = _verdict(_leader(0.277, None))
     assert text.startswith("missing effect: hardening")
-    assert "a misfit remains after it (5.5 × noise)" in text
+    assert "a misfit remains after it (5.54 × noise)" in text
     assert unexplained == {"covariate": "angle_deg", "p_value": 1e-9}
     assert "write a plug-in effect" in text
 
@@ -50,10 +51,32 @@ def test_a_misfit_left_after_a_settled_leader_is_unexplained():
 def test_a_misfit_left_after_an_unsettled_leader_is_open_and_says_what_would_tell():
     unexplained, text = _verdict(_leader(0.277, SPENT))
     assert text.startswith("missing effect: hardening")
-    assert f"its calibration on calculix did not settle ({SPENT})" in text
-    assert "whether another effect is missing is open" in text
-    assert "calibration_solver_calls" in text and "surrogate compare --params" in text
+    assert (
+        "a misfit remains after it (5.54 × noise); whether another effect is missing is open"
+        in text
+    )
+    assert f"the calibration with `hardening` on calculix stopped short ({SPENT})" in text
+    assert "surrogate calibrate --effect hardening --budget N" in text
+    assert "surrogate compare --params" in text
     assert unexplained is None and "plug-in" not in text
+
+
+def test_an_unsettled_leader_that_is_not_decisive_leaves_the_question_open_too():
+    """Its ΔBIC and held-out error are upper bounds as well: "unexplained" would claim
+    what the stopped calibration did not show."""
+    undecided = replace(_leader(0.277, SPENT), delta_bic=-5.0)
+    unexplained, text = _verdict(undecided)
+    assert text.startswith("whether an effect is missing is open: the calibration with")
+    assert unexplained is None and "plug-in" not in text
+    settled = replace(undecided, unsettled=None)
+    unexplained, text = _verdict(settled)
+    assert unexplained is not None and text.startswith("unexplained: residual follows angle_deg")
+
+
+def test_the_tables_mark_a_ranking_entry_whose_figures_are_upper_bounds():
+    assert ranking_label(_leader(0.277, SPENT).to_json()) == "hardening (not settled)"
+    assert ranking_label(_leader(0.277, None).to_json()) == "hardening"
+    assert ranking_label({"effect": "tension"}) == "tension"  # records written before the key
 
 
 @pytest.mark.parametrize("unsettled", [None, SPENT])

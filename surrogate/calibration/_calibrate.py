@@ -226,8 +226,7 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
             f"calibration of {name} found no parameter point the solver could run at every "
             f"test ({reason}); check the parameter ranges"
         )
-    # converged: the best verified point is a local optimum the first-order test passed
-    converged = fit is not None and fit.converged and fit.rmse <= best.rmse
+    converged = loop.converged_at_best()
     misfit, p_value, determination = None, None, None
     if fit is not None and converged:
         p_value = loop.p_value(fit)

@@ -81,6 +81,7 @@ from ._statistics import (
     misfit_p_value,
     named,
     noise_dof,
+    ranking_label,
     residual_follows,
     tied,
     verdict,
@@ -107,9 +108,12 @@ class DiagnosisResult:
     the built-in model corrected towards the external solver, and only the leaders
     were confirmed on it — ``confirmed`` (their ranking entries carry
     ``confirmed_by``: RMSE, held-out RMSE and ΔBIC from expensive-verified
-    calibrations), ``skipped`` (effects the expensive solver cannot model, with the
-    reason), ``low_fidelity_runs``, ``correction`` (its size at the current model's
-    calibrated point), ``dropped``. ``solver_calls`` counts the expensive runs.
+    calibrations; and ``unsettled``: why that calibration stopped before a verified
+    local optimum, None where it reached one — then the figures are upper bounds,
+    ``unexplained`` stays None and the verdict says the question is open),
+    ``skipped`` (effects the expensive solver cannot model, with the reason),
+    ``low_fidelity_runs``, ``correction`` (its size at the current model's calibrated
+    point), ``dropped``. ``solver_calls`` counts the expensive runs.
     """
 
     rmse_n: float
@@ -553,7 +557,8 @@ def _attach_ladder(
         return
     save_plotly_graph_object(study, figure, graph_object_id="model-ladder")
     rows = [
-        f"| {e['effect']} | {e['rmse_n']:.4g} | {e['heldout_rmse_n']:.4g} | {e['delta_bic']:.1f} |"
+        f"| {ranking_label(e)} | {e['rmse_n']:.4g} | {e['heldout_rmse_n']:.4g} "
+        f"| {e['delta_bic']:.1f} |"
         for e in result.ranking
     ]
     save_note(

@@ -220,7 +220,7 @@ class CorrectedCalibration(CalibrationLoop):
             self._fall_back()
             return
         self._tested_best()
-        if not self._converged_at_best():
+        if not self.converged_at_best():
             short = "the corrected model's loop ended short of a verified local optimum"
             self._fall_back(self.stalled or short, near=True)
 
@@ -427,10 +427,6 @@ class CorrectedCalibration(CalibrationLoop):
             self._say(f"the built-in solver failed at the verified point: {failed}")
         finally:
             self._counted(model.runs)
-
-    def _converged_at_best(self) -> bool:
-        fit, best = self.best_fit(), self.best()
-        return fit is not None and best is not None and fit.converged and fit.rmse <= best.rmse
 
     def _predicted(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """The corrected model's curves (G, A) and their standard deviations at ``theta``

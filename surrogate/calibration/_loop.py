@@ -280,6 +280,11 @@ class CalibrationLoop:
     def best(self) -> VerifiedPoint | None:
         return min(self.verified, key=lambda v: v.rmse) if self.verified else None
 
+    def converged_at_best(self) -> bool:
+        """Whether the best verified point is a local optimum the first-order test passed."""
+        fit, best = self.best_fit(), self.best()
+        return fit is not None and best is not None and fit.converged and fit.rmse <= best.rmse
+
     def best_fit(self) -> LocalFit | None:
         """The fit of lowest RMSE; of two at one point, the one whose test held (a
         multi-fidelity loop's corrected-model test and the expensive local phase's)."""

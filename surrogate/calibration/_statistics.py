@@ -38,6 +38,7 @@ __all__ = [
     "misfit_p_value",
     "named",
     "noise_dof",
+    "ranking_label",
     "residual_follows",
     "tied",
     "verdict",
@@ -246,11 +247,10 @@ def verdict(
     No systematic misfit: nothing needed. Else the best candidate is named when
     :func:`named` holds (with the candidates ``tied_with`` it); when none brings the
     error near the noise, the column the residual follows (``follows``, significant
-    first) is named as unexplained instead — unless the named candidate's calibration
-    ended before a verified local optimum (``unsettled``): its misfit may then be the
-    search's, and whether anything else is missing is said to be open, with what would
-    tell (on CalculiX-made curves with hidden hardening such a calibration stopped at
-    5.9 × noise where CalculiX at the truth gives 1.07 ×: README).
+    first) is named as unexplained instead — unless the leader's figures come from a
+    calibration that stopped before a verified local optimum (``unsettled``: an
+    expensive solver's confirmation, README "Multi-fidelity"): they are then upper
+    bounds, and whether an effect is missing is said to be open, with what would tell.
     """
     trail = [f for f in follows if f["significant"]]
     column = trail[0]["covariate"] if trail else None
@@ -265,21 +265,31 @@ def verdict(
         text = _named_text(best, heldout, noise, column, tied_with)
         if best.rmse_n <= NEAR_NOISE * noise:
             return None, text
-        text += f"; a misfit remains after it ({best.rmse_n / noise:.2g} × noise)"
-        if best.unsettled is not None:
-            return None, text + _unsettled_text(best)
+        text += f"; a misfit remains after it ({best.rmse_n / noise:.3g} × noise)"
+    if best is not None and best.unsettled is not None:
+        return None, (text + "; " if text else "") + _open_text(best, bool(text))
     return _unexplained(rmse, noise, column, trail, text)
 
 
-def _unsettled_text(best: Candidate) -> str:
-    """Why a misfit left after a named effect is not called unexplained."""
+def _open_text(best: Candidate, is_named: bool) -> str:
+    """Why a misfit the leader leaves is not called unexplained: its figures come from a
+    calibration that stopped before a verified local optimum (upper bounds)."""
     on = f" on {best.confirmed_by}" if best.confirmed_by else ""
+    effect = best.effect
     return (
-        f", but its calibration{on} did not settle ({best.unsettled}): "
-        "the misfit left may be the search's, so whether another effect is missing is open — "
-        "a calibration with it and a larger `[budget] calibration_solver_calls`, or `surrogate "
-        "compare --params` at values you expect, would tell"
+        f"whether {'another' if is_named else 'an'} effect is missing is open: the "
+        f"calibration with `{effect}`{on} stopped short ({best.unsettled}), so its RMSE "
+        f"and ΔBIC are upper bounds and a better fit may exist — more runs (`surrogate "
+        f"calibrate --effect {effect} --budget N`, with the model's other effects) would "
+        f"settle that optimum, `surrogate compare --params …` at values you expect would "
+        f"show one elsewhere"
     )
+
+
+def ranking_label(entry: Mapping[str, Any]) -> str:
+    """A ranking entry's effect as the tables show it: marked where its figures are
+    upper bounds (``unsettled``: its calibration stopped short)."""
+    return f"{entry['effect']} (not settled)" if entry.get("unsettled") else str(entry["effect"])
 
 
 def _named_text(

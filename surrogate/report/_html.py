@@ -17,6 +17,7 @@ from typing import Any
 
 from ..calibration._compare import comparison_figures
 from ..calibration._diagnose import ladder_figure
+from ..calibration._statistics import ranking_label
 from ..storage._dashboard import verified_curves_figure
 from ..storage._storage import redacted_url
 from ._findings import Calibration, Findings, Identification
@@ -404,7 +405,7 @@ def _verdict(found: Calibration) -> list[str]:
             ["added effect", "RMSE [N]", "held-out RMSE [N]", "ΔBIC"],
             [
                 [
-                    _e(e["effect"]),
+                    _e(ranking_label(e)),
                     _num(e["rmse_n"]),
                     _num(e["heldout_rmse_n"]),
                     _num(e["delta_bic"], 3),

@@ -113,11 +113,24 @@ def simulate(
     """
     rig = Rig() if rig is None else rig
     coating = {"ecoat_gpa": ecoat_gpa, "scoat_gpa": scoat_gpa, "tcoat_mm": tcoat_mm}
-    inputs, checked_rig = _checked_inputs(
+    result, checked_rig = solve_checked(
         coating, rig, solver, effects, conditions, solver_settings or {}
     )
-    result = get_solver(solver).run(inputs)
     return _curve(result, coating, checked_rig)
+
+
+def solve_checked(
+    coating: dict[str, float],
+    rig: Rig,
+    solver: str,
+    effects: Mapping[str, Mapping[str, float]] | None,
+    conditions: Mapping[str, Any] | None,
+    settings: Mapping[str, Any],
+) -> tuple[dict[str, Any], Rig]:
+    """:func:`simulate`'s run: the solver's whole result (a benchmark reads more of it
+    than the curve: CalculiX's ``increments``) and the rig of the test's conditions."""
+    inputs, checked_rig = _checked_inputs(coating, rig, solver, effects, conditions, settings)
+    return get_solver(solver).run(inputs), checked_rig
 
 
 def _checked_inputs(
