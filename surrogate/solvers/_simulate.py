@@ -127,22 +127,10 @@ def solve_checked(
     conditions: Mapping[str, Any] | None,
     settings: Mapping[str, Any],
 ) -> tuple[dict[str, Any], Rig]:
-    """:func:`simulate`'s run: the solver's whole result (a benchmark reads more of it
-    than the curve: CalculiX's ``increments``) and the rig of the test's conditions."""
-    inputs, checked_rig = _checked_inputs(coating, rig, solver, effects, conditions, settings)
-    return get_solver(solver).run(inputs), checked_rig
-
-
-def _checked_inputs(
-    coating: dict[str, float],
-    rig: Rig,
-    solver: str,
-    effects: Mapping[str, Mapping[str, float]] | None,
-    conditions: Mapping[str, Any] | None,
-    settings: Mapping[str, Any],
-) -> tuple[dict[str, Any], Rig]:
-    """The run's inputs and the rig of its conditions; an InputDataError (the solver
-    kind, its settings, the coating, conditions, effects) before anything is solved."""
+    """:func:`simulate`'s run: an InputDataError (the solver kind, its settings, the
+    coating, conditions, effects) before anything is solved; then the solver's whole
+    result (a benchmark reads more of it than the curve: CalculiX's ``increments``) and
+    the rig of the test's conditions."""
     checked_settings = get_solver(solver).check_settings(settings)
     state = model_state_of(
         coating["ecoat_gpa"], coating["scoat_gpa"], coating["tcoat_mm"], rig, effects, conditions
@@ -155,7 +143,7 @@ def _checked_inputs(
         conditions=conditions,
         solver_settings=checked_settings,
     )
-    return inputs, state.rig
+    return get_solver(solver).run(inputs), state.rig
 
 
 def _curve(result: Mapping[str, Any], coating: Mapping[str, float], rig: Rig) -> BendingCurve:
