@@ -212,6 +212,7 @@ def diagnosis_case(task: tuple[str, Path]) -> dict[str, Any]:
         "builtin_runs": mf.get("low_fidelity_runs"),
         "before": result.rmse_n / result.noise_n,
         "after": (top["rmse_n"] if top else result.rmse_n) / result.noise_n,
+        "unsettled": top.get("unsettled") if top else None,
         "seconds": seconds,
         "verdict": result.verdict,
     }
@@ -260,6 +261,8 @@ def _print(row: dict[str, Any]) -> None:
         f"RMSE/noise {row['before']:.2f} → {row['after']:.2f}  {row['seconds']:.0f} s",
         flush=True,
     )
+    if row.get("unsettled"):  # the RMSE after is an upper bound
+        print(f"  its calibration stopped short: {row['unsettled']}", flush=True)
 
 
 def main() -> None:
