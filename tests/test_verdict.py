@@ -56,7 +56,10 @@ def test_a_misfit_left_after_an_unsettled_leader_is_open_and_says_what_would_tel
         in text
     )
     assert f"the calibration with `hardening` on calculix stopped short ({SPENT})" in text
-    assert "surrogate calibrate --effect hardening --budget N" in text
+    assert (
+        "a calibration with it on calculix itself (`surrogate calibrate --effect hardening`" in text
+    )
+    assert "`[solver] multi_fidelity = false`: calculix's own global phase" in text
     assert "surrogate compare --params" in text
     assert unexplained is None and "plug-in" not in text
 

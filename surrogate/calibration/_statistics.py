@@ -274,15 +274,21 @@ def verdict(
 def _open_text(best: Candidate, is_named: bool) -> str:
     """Why a misfit the leader leaves is not called unexplained: its figures come from a
     calibration that stopped before a verified local optimum (upper bounds)."""
-    on = f" on {best.confirmed_by}" if best.confirmed_by else ""
-    effect = best.effect
+    effect, solver = best.effect, best.confirmed_by
+    on = f" on {solver}" if solver else ""
+    itself = (
+        f"a calibration with it on {solver} itself (`surrogate calibrate --effect {effect}` "
+        f"with the model's other effects and `[solver] multi_fidelity = false`: {solver}'s "
+        "own global phase)"
+        if solver
+        else f"a calibration with it and more runs (`surrogate calibrate --effect {effect} "
+        "--budget N`)"
+    )
     return (
         f"whether {'another' if is_named else 'an'} effect is missing is open: the "
         f"calibration with `{effect}`{on} stopped short ({best.unsettled}), so its RMSE "
-        f"and ΔBIC are upper bounds and a better fit may exist — more runs (`surrogate "
-        f"calibrate --effect {effect} --budget N`, with the model's other effects) would "
-        f"settle that optimum, `surrogate compare --params …` at values you expect would "
-        f"show one elsewhere"
+        f"and ΔBIC are upper bounds and a better fit may exist — {itself}, or `surrogate "
+        "compare --params …` at values you expect, would tell"
     )
 
 
