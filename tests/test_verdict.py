@@ -76,6 +76,19 @@ def test_an_unsettled_leader_that_is_not_decisive_leaves_the_question_open_too()
     assert unexplained is not None and text.startswith("unexplained: residual follows angle_deg")
 
 
+def test_a_tied_leader_that_stopped_short_leaves_the_question_open():
+    """The data cannot tell the leaders apart, and one of them may fit better than its
+    figures say: "unexplained" would claim what its calibration did not show."""
+    settled = _leader(0.277, None)
+    tied = replace(_leader(0.28, SPENT), effect="membrane_bending", delta_bic=-92.0)
+    unexplained, text = verdict(
+        0.32, 0.333, NOISE, True, 1e-100, [settled, tied], FOLLOWS, ["membrane_bending"]
+    )
+    assert text.startswith("missing effect: hardening")
+    assert "the calibration with `membrane_bending` on calculix stopped short" in text
+    assert unexplained is None and "plug-in" not in text
+
+
 def test_the_tables_mark_a_ranking_entry_whose_figures_are_upper_bounds():
     assert ranking_label(_leader(0.277, SPENT).to_json()) == "hardening (not settled)"
     assert ranking_label(_leader(0.277, None).to_json()) == "hardening"

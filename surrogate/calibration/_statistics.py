@@ -266,29 +266,24 @@ def verdict(
         if best.rmse_n <= NEAR_NOISE * noise:
             return None, text
         text += f"; a misfit remains after it ({best.rmse_n / noise:.3g} × noise)"
-    if best is not None and best.unsettled is not None:
-        return None, (text + "; " if text else "") + _open_text(best, bool(text))
+    leaders = [c for c in ranking if c is best or c.effect in tied_with]
+    stopped = next((c for c in leaders if c.unsettled is not None), None)
+    if stopped is not None:
+        return None, (text + "; " if text else "") + _open_text(stopped, bool(text))
     return _unexplained(rmse, noise, column, trail, text)
 
 
-def _open_text(best: Candidate, is_named: bool) -> str:
-    """Why a misfit the leader leaves is not called unexplained: its figures come from a
-    calibration that stopped before a verified local optimum (upper bounds)."""
-    effect, solver = best.effect, best.confirmed_by
-    on = f" on {solver}" if solver else ""
-    itself = (
-        f"a calibration with it on {solver} itself (`surrogate calibrate --effect {effect}` "
-        f"with the model's other effects and `[solver] multi_fidelity = false`: {solver}'s "
-        "own global phase)"
-        if solver
-        else f"a calibration with it and more runs (`surrogate calibrate --effect {effect} "
-        "--budget N`)"
-    )
+def _open_text(leader: Candidate, is_named: bool) -> str:
+    """Why a misfit is not called unexplained: a leader's figures come from an expensive
+    solver's calibration that stopped before a verified local optimum (upper bounds)."""
+    effect, solver = leader.effect, leader.confirmed_by or "the full solver"
     return (
         f"whether {'another' if is_named else 'an'} effect is missing is open: the "
-        f"calibration with `{effect}`{on} stopped short ({best.unsettled}), so its RMSE "
-        f"and ΔBIC are upper bounds and a better fit may exist — {itself}, or `surrogate "
-        "compare --params …` at values you expect, would tell"
+        f"calibration with `{effect}` on {solver} stopped short ({leader.unsettled}), so "
+        "its RMSE and ΔBIC are upper bounds and a better fit may exist — a calibration "
+        f"with it on {solver} itself (`surrogate calibrate --effect {effect}` with the "
+        f"model's other effects and `[solver] multi_fidelity = false`: {solver}'s own "
+        "global phase), or `surrogate compare --params …` at values you expect, would tell"
     )
 
 
