@@ -93,9 +93,7 @@ def main() -> None:
         with ProcessPoolExecutor(args.jobs) as pool:
             runs = list(pool.map(_curve, tasks))
         curves = np.array([curve for curve, _ in runs]).reshape(len(coats), len(LENGTHS), 91)
-        attempts = [
-            [runs[i * len(LENGTHS) + j][1] for j in range(len(LENGTHS))] for i in range(len(coats))
-        ]
+        attempts = np.array([attempt for _, attempt in runs]).reshape(len(coats), len(LENGTHS))
         if solver != "builtin":
             print(f"{solver:9s} {'base':18s} attempts: {_attempts(attempts[0])}")
         for index, ((name, eps, _), moved) in enumerate(zip(coats, curves, strict=True)):
@@ -111,7 +109,7 @@ def main() -> None:
             )
 
 
-def _attempts(per_length: list[str]) -> str:
+def _attempts(per_length: np.ndarray) -> str:
     """Which attempt each bending length's run finished with."""
     return "; ".join(f"{length:g} mm {a}" for length, a in zip(LENGTHS, per_length, strict=True))
 

@@ -717,6 +717,8 @@ def _diagnose(args: argparse.Namespace) -> int:
 
 def _print_diagnosis(result: Any) -> None:
     """The text report of a ``DiagnosisResult``: noise test, where, ranking, ladder."""
+    from .calibration._statistics import ranking_label
+
     state = "systematic" if result.systematic else "within the noise"
     print(
         f"RMSE {result.rmse_n:.4g} N (held-out {result.heldout_rmse_n:.4g} N), noise "
@@ -726,8 +728,6 @@ def _print_diagnosis(result: Any) -> None:
         print(f"  fails at {cell['kind']} {cell['name']}: RMSE {cell['rmse_n']:.3g} N")
     follows = [f["covariate"] for f in result.follows if f["significant"]]
     print("residual follows: " + (", ".join(follows) if follows else "nothing recorded"))
-    from .calibration._statistics import ranking_label
-
     print(f"{'added effect':>18} {'RMSE [N]':>9} {'held-out':>9} {'ΔBIC':>8}")
     for entry in result.ranking:
         print(

@@ -117,10 +117,11 @@ of the clamp's hinge), the bottom coat compressed. Measured against the built-in
 ``benchmarks/fidelity.py``'s 10 truths (``benchmarks/calculix_gap.py``, README): with 1
 on both, ideal-plastic coats that yield early (the mid coat at 10 mm, at 20 and 40 N;
 the hardening coat without its hardening) lie +9 to +30 % above the rod at 60°, +49 %
-at 90° and 40 N; 0 on the compressed coat takes off ≤ 4 points of that, so the
-stretched coat's table is what lifts them. 0 on both (deck 9's) stays within −8…+9 %
-at 60° but needed retries at 4 of the 10 (the stretched coat necks); −1 on the
-compressed coat (the rod's law) failed at 3 and needed retries at 3."""
+at 90° and 40 N. Both coats' tables take part: 0 on the compressed coat takes off
+≤ 4 points of that, −1 there (the rod's law: a constant nominal force) about half at
+40 N and most for the hardening coat without its hardening, but failed at 3 of the 10
+and needed retries at 3 (a softening true stress); 0 on both (deck 9's) stays within
+−8…+9 % at 60° but needed retries at 4 (the stretched coat necks)."""
 
 
 @dataclass(frozen=True)
