@@ -568,3 +568,52 @@ def test_the_held_out_error_of_a_verified_fit_without_its_jacobian_is_the_correc
     assert heldout == pytest.approx(expected, rel=1e-6)
     assert loop.low_fidelity_runs >= low_before  # built-in runs, counted; no expensive one
     assert found.solver_calls == loop.runs.calls
+
+
+def test_not_carried_judges_the_inherited_correction_at_its_first_point():
+    """The rule for a correction learned on another model: a prediction off by more
+    than the tolerance at the corrected optimum, whatever its standard deviation."""
+    from surrogate.solvers._fidelity import not_carried
+
+    assert not_carried(0.04, 0.01, 0.05) is None  # within the tolerance
+    assert not_carried(0.003, 0.102, 0.0525) is None  # an uncertain but right prediction
+    said = not_carried(0.414, 0.139, 0.047)  # CalculiX, hidden hardening: 2.98 σ
+    assert said is not None and "missed by 0.414" in said
+    assert not_carried(1.81, 2.38, 0.046) is not None  # hidden tension: 0.76 σ
+
+
+def test_a_correction_learned_on_another_model_hands_its_optimum_to_the_expensive_local_phase(
+    distorted_solver, log_runs
+):
+    """A calibration with an effect added, inheriting the correction the model without it
+    learned (a diagnosis's confirmation): where the correction has not learned the new
+    model's region it is dropped after the first point and the expensive solver's own
+    local phase goes on from there; the same model calibrated again with its own
+    correction keeps it."""
+    from surrogate.calibration._calibrate import run_calibration
+    from surrogate.calibration._fidelity import CurveCorrection
+
+    truth = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
+    hidden = {"tension": {"k_e": 0.006, "k_s": 0.006}}
+    path = _calibration_study(
+        log_runs / "diag", DIAGNOSIS_TESTS, truth, hidden=hidden, seed=3, settings="stiffened = 0.3"
+    )
+    _, base = run_calibration(path, progress=False, record=False)
+    learned = base.correction
+
+    def again(effects):
+        inherited = CurveCorrection(learned.Z, learned.D)
+        return run_calibration(
+            path, effects=effects, progress=False, record=False, correction=inherited
+        )
+
+    found, loop = again(("tension",))
+    assert loop.dropped is not None, loop.dropped
+    assert loop.dropped.startswith("at the corrected model's optimum the correction learned")
+    G = len(loop.problem.groups)
+    assert loop.dropped_after == G  # after the first point, its runs at every group
+    assert loop.fits and loop.verified[0].phase == "verified"  # the local phase from it
+    assert found.rmse_n <= 1.3 * found.noise_n, found.message
+
+    _, same = again(())
+    assert same.dropped is None  # its optimum is where its correction learned

@@ -19,9 +19,11 @@ The scheme's rules are :mod:`surrogate.solvers._fidelity`'s. Here:
   expensive solver's at that scale: the expensive solver's own first-order test decides
   at the best verified point (its Jacobian, its Gauss–Newton step). Where the
   correction is too large or too irregular it is dropped, and the expensive solver's own
-  local phase finishes from the best verified point; where the expensive solver could
-  run none of the first points, its own calibration (today's loop) spends what is left
-  of the budget.
+  local phase finishes from the best verified point — so too where a correction learned
+  on another model (a diagnosis's confirmation) has not learned this one's region
+  (:func:`~surrogate.solvers._fidelity.not_carried`, at the first point); where the
+  expensive solver could run none of the first points, its own calibration (today's
+  loop) spends what is left of the budget.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from ..solvers._fidelity import (
     correction_refused,
     discrepancy_inputs,
     low_fidelity_inputs,
+    not_carried,
 )
 from ._local import (
     BACKTRACK,
@@ -176,6 +179,7 @@ class CorrectedCalibration(CalibrationLoop):
         self.radius = 1.0  # the trust region of the proposals, in fit coordinates
         self._proposal: tuple[float, float, float] | None = None  # best, predicted RMSE, step
         self.stalled: str | None = None  # why the corrected model's proposals stopped
+        self.prediction: tuple[float, float] | None = None  # the last one's error and SD [N]
 
     # -- the runs -------------------------------------------------------------------------------
     def corrected_runs(self, correction: CurveCorrection | None) -> CorrectedRuns:
@@ -197,8 +201,15 @@ class CorrectedCalibration(CalibrationLoop):
             return
         theta, fit = start
         G = len(self.problem.groups)
-        fresh = fit is not None and not self.correction.n_runs  # read before it learns
+        inherited = bool(self.correction.n_runs)  # read before it learns
+        fresh = fit is not None and not inherited
         ran = self._teach(theta)  # a point the expensive solver cannot run is left out
+        if ran and inherited and self.prediction is not None:
+            why = not_carried(*self.prediction, self.noise)
+            if why is not None:  # its optimum is a start: the expensive local phase goes on
+                self._drop(why)
+                self._fall_back()
+                return
         probes = self._probes(fit, ran) if fresh else []
         for tries in probes:  # the second probe only where the expensive solver failed
             for point in tries:
@@ -481,9 +492,11 @@ class CorrectedCalibration(CalibrationLoop):
             if reason is not None:
                 return self._drop(reason)
         curves, stds, _ = predicted
+        self.prediction = None
         if np.all(np.isfinite(curves)) and stds.size:
             error = float(np.sqrt(np.mean((point.curves - curves) ** 2)))
             sd = float(np.sqrt(np.mean(stds**2)))
+            self.prediction = (error, sd)
             if self.misses.judge(error, sd, self.noise):
                 return self._drop(self.misses.reason)
         return False
