@@ -582,6 +582,7 @@ def test_not_carried_judges_the_inherited_correction_at_its_first_point():
     assert not_carried(1.81, 2.38, 0.046) is not None  # hidden tension: 0.76 σ
 
 
+@pytest.mark.slow
 def test_a_correction_learned_on_another_model_hands_its_optimum_to_the_expensive_local_phase(
     distorted_solver, log_runs
 ):
