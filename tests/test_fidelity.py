@@ -615,6 +615,9 @@ def test_a_correction_learned_on_another_model_hands_its_optimum_to_the_expensiv
     assert loop.dropped_after == G  # after the first point, its runs at every group
     assert loop.fits and loop.verified[0].phase == "verified"  # the local phase from it
     assert found.rmse_n <= 1.3 * found.noise_n, found.message
+    assert "test-distorted's own local phase went on from the best verified point" in (
+        found.message
+    )
 
     _, same = again(())
     assert same.dropped is None  # its optimum is where its correction learned

@@ -290,12 +290,19 @@ def _multi_fidelity(loop: CalibrationLoop, best: VerifiedPoint) -> dict[str, Any
     the built-in model towards an external solver)."""
     if not isinstance(loop, CorrectedCalibration):
         return None
+    kind = loop.problem.spec.solver
+    then = (
+        f"{kind}'s own calibration took over"
+        if loop.single_fidelity
+        else f"{kind}'s own local phase went on from the best verified point"
+    )
     return fidelity_record(
-        loop.problem.spec.solver,
+        kind,
         loop.low_fidelity_runs,
         loop.correction_at(best),
         loop.dropped,
         loop.dropped_after,
+        then,
     )
 
 

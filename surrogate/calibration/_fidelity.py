@@ -179,7 +179,7 @@ class CorrectedCalibration(CalibrationLoop):
         self.radius = 1.0  # the trust region of the proposals, in fit coordinates
         self._proposal: tuple[float, float, float] | None = None  # best, predicted RMSE, step
         self.stalled: str | None = None  # why the corrected model's proposals stopped
-        self.prediction: tuple[float, float] | None = None  # the last one's error and SD [N]
+        self.prediction: tuple[float, float] | None = None  # the last point's error, SD [N]
 
     # -- the runs -------------------------------------------------------------------------------
     def corrected_runs(self, correction: CurveCorrection | None) -> CorrectedRuns:
@@ -204,10 +204,11 @@ class CorrectedCalibration(CalibrationLoop):
         inherited = bool(self.correction.n_runs)  # read before it learns
         fresh = fit is not None and not inherited
         ran = self._teach(theta)  # a point the expensive solver cannot run is left out
-        if ran and inherited and self.prediction is not None:
-            why = not_carried(*self.prediction, self.noise)
-            if why is not None:  # its optimum is a start: the expensive local phase goes on
-                self._drop(why)
+        if ran and inherited:
+            if self.prediction is None:
+                self._say("the built-in solver failed at the optimum: the correction is not judged")
+            elif (why := not_carried(*self.prediction, self.noise)) is not None:
+                self._drop(why)  # its optimum is a start: the expensive local phase goes on
                 self._fall_back()
                 return
         probes = self._probes(fit, ran) if fresh else []
@@ -335,7 +336,9 @@ class CorrectedCalibration(CalibrationLoop):
 
     def _teach(self, theta: np.ndarray) -> bool:
         """Verify ``theta`` with the expensive solver and teach the correction its runs;
-        False where the expensive solver failed or the correction was dropped."""
+        False where the expensive solver failed or the correction was dropped.
+        ``prediction`` is then this point's (None where none was made or judged)."""
+        self.prediction = None
         predicted = self._predicted(theta)
         point = self._verify(theta, predicted[2])
         if point is None:
@@ -492,7 +495,6 @@ class CorrectedCalibration(CalibrationLoop):
             if reason is not None:
                 return self._drop(reason)
         curves, stds, _ = predicted
-        self.prediction = None
         if np.all(np.isfinite(curves)) and stds.size:
             error = float(np.sqrt(np.mean((point.curves - curves) ** 2)))
             sd = float(np.sqrt(np.mean(stds**2)))

@@ -228,14 +228,16 @@ def fidelity_record(
     correction: Correction | None,
     dropped: str | None,
     dropped_after: int,
+    then: str = "the single-fidelity loop took over",
 ) -> dict[str, Any]:
     """The ``multi_fidelity`` key of ``run --json`` and ``calibrate --json``, and the
     sentence (``sentence``) their message ends with: the built-in runs spent and the size
-    of the correction at the answer — or why the correction was dropped."""
+    of the correction at the answer — or why the correction was dropped, and what went
+    on (``then``)."""
     if dropped is not None:
         sentence = (
             f". The built-in solver was dropped as the prior after {dropped_after} {kind} "
-            f"runs: {dropped}; the single-fidelity loop took over"
+            f"runs: {dropped}; {then}"
         )
     else:
         sentence = (
