@@ -179,7 +179,7 @@ class CorrectedCalibration(CalibrationLoop):
         self.radius = 1.0  # the trust region of the proposals, in fit coordinates
         self._proposal: tuple[float, float, float] | None = None  # best, predicted RMSE, step
         self.stalled: str | None = None  # why the corrected model's proposals stopped
-        self.prediction: tuple[float, float] | None = None  # the last point's error, SD [N]
+        self.inherited = bool(self.correction.n_runs)  # learned on another model
 
     # -- the runs -------------------------------------------------------------------------------
     def corrected_runs(self, correction: CurveCorrection | None) -> CorrectedRuns:
@@ -201,16 +201,8 @@ class CorrectedCalibration(CalibrationLoop):
             return
         theta, fit = start
         G = len(self.problem.groups)
-        inherited = bool(self.correction.n_runs)  # read before it learns
-        fresh = fit is not None and not inherited
+        fresh = fit is not None and not self.inherited
         ran = self._teach(theta)  # a point the expensive solver cannot run is left out
-        if ran and inherited:
-            if self.prediction is None:
-                self._say("the built-in solver failed at the optimum: the correction is not judged")
-            elif (why := not_carried(*self.prediction, self.noise)) is not None:
-                self._drop(why)  # its optimum is a start: the expensive local phase goes on
-                self._fall_back()
-                return
         probes = self._probes(fit, ran) if fresh else []
         for tries in probes:  # the second probe only where the expensive solver failed
             for point in tries:
@@ -336,9 +328,7 @@ class CorrectedCalibration(CalibrationLoop):
 
     def _teach(self, theta: np.ndarray) -> bool:
         """Verify ``theta`` with the expensive solver and teach the correction its runs;
-        False where the expensive solver failed or the correction was dropped.
-        ``prediction`` is then this point's (None where none was made or judged)."""
-        self.prediction = None
+        False where the expensive solver failed or the correction was dropped."""
         predicted = self._predicted(theta)
         point = self._verify(theta, predicted[2])
         if point is None:
@@ -485,8 +475,10 @@ class CorrectedCalibration(CalibrationLoop):
         lows: list[dict[str, Any]],
         predicted: tuple[np.ndarray, np.ndarray, float],
     ) -> bool:
-        """The correction's rules at a verified point: its size, and whether the expensive
-        curves fell within what the corrected model predicted (sets ``dropped``)."""
+        """The correction's rules at a verified point: its size, whether the expensive
+        curves fell within what the corrected model predicted, and — at the first point
+        of a correction learned on another model — whether it carries to this one
+        (:func:`not_carried`: its optimum is then a start). Sets ``dropped``."""
         highs = [self.runs.cache.get(key) for key in point.keys]
         if len(lows) == len(highs) and all(h is not None for h in highs):
             size = Correction.between(lows, highs)
@@ -498,9 +490,14 @@ class CorrectedCalibration(CalibrationLoop):
         if np.all(np.isfinite(curves)) and stds.size:
             error = float(np.sqrt(np.mean((point.curves - curves) ** 2)))
             sd = float(np.sqrt(np.mean(stds**2)))
-            self.prediction = (error, sd)
+            if self.inherited and len(self.verified) == 1:
+                why = not_carried(error, sd, self.noise)
+                if why is not None:
+                    return self._drop(why)
             if self.misses.judge(error, sd, self.noise):
                 return self._drop(self.misses.reason)
+        elif self.inherited and len(self.verified) == 1:
+            self._say("the built-in solver failed at the optimum: the correction is not judged")
         return False
 
     def _drop(self, reason: str) -> bool:
