@@ -28,7 +28,7 @@ result caches let a second run reuse the CalculiX runs: a cached run still count
 CalculiX run of the calibration it belongs to), each with its ``progress.log``.
 
 Run: .venv/bin/python benchmarks/fidelity.py [--only calibration,diagnosis] [--jobs 2]
-     [--work DIR] [--out fidelity.json]
+     [--cases mid,paper,hardening,tension] [--work DIR] [--out fidelity.json]
 """
 
 from __future__ import annotations
@@ -271,11 +271,19 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2, help="cases at once")
     parser.add_argument("--work", type=Path, help="keep the study folders (and their caches)")
     parser.add_argument("--out", type=Path, help="write the rows as JSON")
+    parser.add_argument("--cases", help="only these cases, e.g. paper,tension (default: all)")
     args = parser.parse_args()
     kinds = args.only.split(",")
+    names = set(args.cases.split(",")) if args.cases else set(CALIBRATIONS) | set(DIAGNOSES)
+    if unknown := names - set(CALIBRATIONS) - set(DIAGNOSES):
+        parser.error(
+            f"unknown case(s) {', '.join(sorted(unknown))}: choose from "
+            f"{', '.join([*CALIBRATIONS, *DIAGNOSES])}"
+        )
     work = args.work or Path(tempfile.mkdtemp(prefix="fidelity-bench-"))
     tasks = [("calibration", n, work) for n in CALIBRATIONS if "calibration" in kinds]
     tasks += [("diagnosis", n, work) for n in DIAGNOSES if "diagnosis" in kinds]
+    tasks = [task for task in tasks if task[1] in names]
     print(f"{len(tasks)} cases, {args.jobs} at once; {machine()}; work folder {work}", flush=True)
     start = time.perf_counter()
     rows = []

@@ -169,11 +169,21 @@ def test_a_retry_keeps_the_first_attempts_increments_up_to_where_it_stopped():
     ended = _next_attempt(coarse, coarse, 89.99999, 90.0)
     assert ended.fixed_increment_deg is None
     assert ended == _next_attempt(coarse, retry, 1, 90)
+    # then automatic increments of at most the fixed size, starting with it (the fixed
+    # path wherever ccx converges), then the mesh's own automatic ones
     after = [_next_attempt(coarse, retry, 50.0, 90.0)]
     after.append(_next_attempt(coarse, after[0], 50.0, 90.0))
     assert [m.fixed_increment_deg for m in after] == [None, None]
-    assert [m.max_increment_deg for m in after] == [3.0, 1.5]
+    assert [m.max_increment_deg for m in after] == [1.125, 3.0]
+    assert [m.initial_increment_deg for m in after] == [1.125, 1.5]
     assert _next_attempt(coarse, after[1], 50.0, 90.0) is None
+    half = _next_attempt(coarse, coarse, 0.5, 90.0)
+    assert _next_attempt(coarse, half, 0.5, 90.0) == after[0]
+    # the fine mesh's automatic increments: at most half its largest, then none
+    fine = CALCULIX_MESHES["fine"]
+    smaller = _next_attempt(fine, fine, 50.0, 90.0)
+    assert (smaller.fixed_increment_deg, smaller.max_increment_deg) == (None, 0.5)
+    assert _next_attempt(fine, smaller, 50.0, 90.0) is None
 
 
 def test_bad_mesh_and_unsupported_effect_are_input_errors():
@@ -246,8 +256,8 @@ def test_ccx_stopping_is_a_failed_run_with_its_reason(tmp_path, monkeypatch, exi
     assert result["reason"] == (
         f"with fixed increments of 1.125°: {stopped}; "
         f"again with fixed increments of 1.125° to 25.875°, then 0.5625°: {stopped}; "
-        f"again with automatic increments of at most 3°: {stopped}; "
-        f"again with automatic increments of at most 1.5°: {stopped}"
+        f"again with automatic increments of at most 1.125°: {stopped}; "
+        f"again with automatic increments of at most 3°: {stopped}"
     )
     assert list((tmp_path / "work").iterdir()) == []
 
@@ -318,6 +328,6 @@ def test_a_stalled_ccx_is_retried_and_named(tmp_path, sleep):
     assert result["reason"] == (
         f"with fixed increments of 1.125°: {stalled}; "
         f"again with fixed increments of 0.5625°: {stalled}; "
-        f"again with automatic increments of at most 3°: {stalled}; "
-        f"again with automatic increments of at most 1.5°: {stalled}"
+        f"again with automatic increments of at most 1.125°: {stalled}; "
+        f"again with automatic increments of at most 3°: {stalled}"
     )
