@@ -284,6 +284,8 @@ def main() -> None:
     tasks = [("calibration", n, work) for n in CALIBRATIONS if "calibration" in kinds]
     tasks += [("diagnosis", n, work) for n in DIAGNOSES if "diagnosis" in kinds]
     tasks = [task for task in tasks if task[1] in names]
+    if not tasks:
+        parser.error(f"no case of --only {args.only} is among --cases {args.cases}")
     print(f"{len(tasks)} cases, {args.jobs} at once; {machine()}; work folder {work}", flush=True)
     start = time.perf_counter()
     rows = []

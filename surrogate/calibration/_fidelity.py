@@ -382,7 +382,7 @@ class CorrectedCalibration(CalibrationLoop):
         test judges a local optimum, the corrected model's first-order information is not
         the expensive solver's (CalculiX's curves change shape with Tcoat at fixed D and
         Mp; a run ccx finished only with other increments lies off its neighbours where
-        the coat yields: deck 12's automatic 3°, 1.2 % at F60; a last increment halved,
+        the coat yields: deck 12's automatic 3°, 1.3 % at F60; a last increment halved,
         at the curve's end), and the expensive solver's own test decides
         (:meth:`run`).
 

@@ -170,7 +170,7 @@ def test_a_retry_keeps_the_first_attempts_increments_up_to_where_it_stopped():
     assert ended.fixed_increment_deg is None
     assert ended == _next_attempt(coarse, retry, 1, 90)
     # then automatic increments of at most the fixed size, starting with it (the fixed
-    # path wherever ccx converges), then the mesh's own automatic ones
+    # path up to a cutback), then the mesh's own automatic ones
     after = [_next_attempt(coarse, retry, 50.0, 90.0)]
     after.append(_next_attempt(coarse, after[0], 50.0, 90.0))
     assert [m.fixed_increment_deg for m in after] == [None, None]
