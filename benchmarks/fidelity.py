@@ -28,7 +28,7 @@ result caches let a second run reuse the CalculiX runs: a cached run still count
 CalculiX run of the calibration it belongs to), each with its ``progress.log``.
 
 Run: .venv/bin/python benchmarks/fidelity.py [--only calibration,diagnosis] [--jobs 2]
-     [--cases mid,paper,hardening,tension] [--work DIR] [--out fidelity.json]
+     [--cases mid,paper,hardening,tension] [--seed N] [--work DIR] [--out fidelity.json]
 """
 
 from __future__ import annotations
@@ -155,10 +155,17 @@ def same_section(coating: dict[str, float], factor: float) -> dict[str, float]:
     return {"ecoat_gpa": d / unit_d, "scoat_gpa": mp / unit_mp, "tcoat_mm": tcoat}
 
 
-def calibration_case(task: tuple[str, Path]) -> dict[str, Any]:
-    name, work = task
+def calibration_case(task: tuple[str, Path, int | None]) -> dict[str, Any]:
+    name, work, seed = task
     truth = CALIBRATIONS[name]
-    path = _study(work / f"calibration-{name}", TWO_LENGTHS, truth, None, seed=1, stated_noise=True)
+    path = _study(
+        work / f"calibration-{name}",
+        TWO_LENGTHS,
+        truth,
+        None,
+        seed=1 if seed is None else seed,
+        stated_noise=True,
+    )
     at_truth = surrogate.compare(path, params=truth, plots=False, progress=False).rmse_n
     start = time.perf_counter()
     with _progress_log(path.parent):
@@ -191,10 +198,17 @@ def calibration_case(task: tuple[str, Path]) -> dict[str, Any]:
     }
 
 
-def diagnosis_case(task: tuple[str, Path]) -> dict[str, Any]:
-    name, work = task
+def diagnosis_case(task: tuple[str, Path, int | None]) -> dict[str, Any]:
+    name, work, seed = task
     coating, hidden, tests = DIAGNOSES[name]
-    path = _study(work / f"diagnosis-{name}", tests, coating, hidden, seed=2, stated_noise=False)
+    path = _study(
+        work / f"diagnosis-{name}",
+        tests,
+        coating,
+        hidden,
+        seed=2 if seed is None else seed,
+        stated_noise=False,
+    )
     start = time.perf_counter()
     with _progress_log(path.parent):
         result = surrogate.diagnose(path, jobs=1, progress=True)
@@ -218,12 +232,13 @@ def diagnosis_case(task: tuple[str, Path]) -> dict[str, Any]:
     }
 
 
-def _job(task: tuple[str, str, Path]) -> dict[str, Any]:
+def _job(task: tuple[str, str, Path, int | None]) -> dict[str, Any]:
     """One case; a case that fails is a row with its error (the others go on)."""
-    kind, name, work = task
+    kind, name, work, seed = task
     start = time.perf_counter()
     try:
-        return (calibration_case if kind == "calibration" else diagnosis_case)((name, work))
+        case = calibration_case if kind == "calibration" else diagnosis_case
+        return case((name, work, seed))
     except surrogate.InputDataError as error:
         return {
             "kind": kind,
@@ -272,6 +287,9 @@ def main() -> None:
     parser.add_argument("--work", type=Path, help="keep the study folders (and their caches)")
     parser.add_argument("--out", type=Path, help="write the rows as JSON")
     parser.add_argument("--cases", help="only these cases, e.g. paper,tension (default: all)")
+    parser.add_argument(
+        "--seed", type=int, help="the data's noise seed (default: 1 calibrations, 2 diagnoses)"
+    )
     args = parser.parse_args()
     kinds = args.only.split(",")
     names = set(args.cases.split(",")) if args.cases else set(CALIBRATIONS) | set(DIAGNOSES)
@@ -281,8 +299,8 @@ def main() -> None:
             f"{', '.join([*CALIBRATIONS, *DIAGNOSES])}"
         )
     work = args.work or Path(tempfile.mkdtemp(prefix="fidelity-bench-"))
-    tasks = [("calibration", n, work) for n in CALIBRATIONS if "calibration" in kinds]
-    tasks += [("diagnosis", n, work) for n in DIAGNOSES if "diagnosis" in kinds]
+    tasks = [("calibration", n, work, args.seed) for n in CALIBRATIONS if "calibration" in kinds]
+    tasks += [("diagnosis", n, work, args.seed) for n in DIAGNOSES if "diagnosis" in kinds]
     tasks = [task for task in tasks if task[1] in names]
     if not tasks:
         parser.error(f"no case of --only {args.only} is among --cases {args.cases}")
