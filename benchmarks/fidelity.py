@@ -60,6 +60,7 @@ from surrogate.calibration._synthetic import synthetic_measurements  # noqa: E40
 
 SOLVER = {"kind": "calculix", "mesh": "coarse"}
 NOISE_N = 0.05
+DATA_SEEDS = {"calibration": 1, "diagnosis": 2}  # the data's noise seed by kind (--seed)
 NEIGHBOUR = 0.01  # the truth's neighbours: Tcoat ±1 % at the same D and Mp
 TWO_LENGTHS = [
     {"test_id": "l10", "bending_length_mm": 10.0},
@@ -155,16 +156,11 @@ def same_section(coating: dict[str, float], factor: float) -> dict[str, float]:
     return {"ecoat_gpa": d / unit_d, "scoat_gpa": mp / unit_mp, "tcoat_mm": tcoat}
 
 
-def calibration_case(task: tuple[str, Path, int | None]) -> dict[str, Any]:
+def calibration_case(task: tuple[str, Path, int]) -> dict[str, Any]:
     name, work, seed = task
     truth = CALIBRATIONS[name]
     path = _study(
-        work / f"calibration-{name}",
-        TWO_LENGTHS,
-        truth,
-        None,
-        seed=1 if seed is None else seed,
-        stated_noise=True,
+        work / f"calibration-{name}", TWO_LENGTHS, truth, None, seed=seed, stated_noise=True
     )
     at_truth = surrogate.compare(path, params=truth, plots=False, progress=False).rmse_n
     start = time.perf_counter()
@@ -198,17 +194,10 @@ def calibration_case(task: tuple[str, Path, int | None]) -> dict[str, Any]:
     }
 
 
-def diagnosis_case(task: tuple[str, Path, int | None]) -> dict[str, Any]:
+def diagnosis_case(task: tuple[str, Path, int]) -> dict[str, Any]:
     name, work, seed = task
     coating, hidden, tests = DIAGNOSES[name]
-    path = _study(
-        work / f"diagnosis-{name}",
-        tests,
-        coating,
-        hidden,
-        seed=2 if seed is None else seed,
-        stated_noise=False,
-    )
+    path = _study(work / f"diagnosis-{name}", tests, coating, hidden, seed=seed, stated_noise=False)
     start = time.perf_counter()
     with _progress_log(path.parent):
         result = surrogate.diagnose(path, jobs=1, progress=True)
@@ -232,7 +221,7 @@ def diagnosis_case(task: tuple[str, Path, int | None]) -> dict[str, Any]:
     }
 
 
-def _job(task: tuple[str, str, Path, int | None]) -> dict[str, Any]:
+def _job(task: tuple[str, str, Path, int]) -> dict[str, Any]:
     """One case; a case that fails is a row with its error (the others go on)."""
     kind, name, work, seed = task
     start = time.perf_counter()
@@ -299,9 +288,12 @@ def main() -> None:
             f"{', '.join([*CALIBRATIONS, *DIAGNOSES])}"
         )
     work = args.work or Path(tempfile.mkdtemp(prefix="fidelity-bench-"))
-    tasks = [("calibration", n, work, args.seed) for n in CALIBRATIONS if "calibration" in kinds]
-    tasks += [("diagnosis", n, work, args.seed) for n in DIAGNOSES if "diagnosis" in kinds]
-    tasks = [task for task in tasks if task[1] in names]
+    cases = [("calibration", n) for n in CALIBRATIONS] + [("diagnosis", n) for n in DIAGNOSES]
+    tasks = [
+        (kind, name, work, DATA_SEEDS[kind] if args.seed is None else args.seed)
+        for kind, name in cases
+        if kind in kinds and name in names
+    ]
     if not tasks:
         parser.error(f"no case of --only {args.only} is among --cases {args.cases}")
     print(f"{len(tasks)} cases, {args.jobs} at once; {machine()}; work folder {work}", flush=True)

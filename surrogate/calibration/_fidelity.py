@@ -488,16 +488,15 @@ class CorrectedCalibration(CalibrationLoop):
             if reason is not None:
                 return self._drop(reason)
         curves, stds, _ = predicted
+        carried_here = self.inherited and len(self.verified) == 1  # is judged at this point
         if np.all(np.isfinite(curves)) and stds.size:
             error = float(np.sqrt(np.mean((point.curves - curves) ** 2)))
             sd = float(np.sqrt(np.mean(stds**2)))
-            if self.inherited and len(self.verified) == 1:
-                why = not_carried(error, sd, self.noise)
-                if why is not None:
-                    return self._drop(why)
+            if carried_here and (why := not_carried(error, sd, self.noise)) is not None:
+                return self._drop(why)
             if self.misses.judge(error, sd, self.noise):
                 return self._drop(self.misses.reason)
-        elif self.inherited and len(self.verified) == 1:
+        elif carried_here:
             self._say("the built-in solver failed at the optimum: the correction is not judged")
         return False
 
