@@ -400,10 +400,13 @@ def _add_run(commands: _Subparsers) -> argparse.ArgumentParser:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from .study._spec import load_study
+
+    spec = load_study(args.study)  # a bad study file is refused before the loop's imports (~2 s)
     from .identify._loop import run
 
     result = run(
-        args.study,
+        spec,
         storage=args.storage,
         seed=args.seed,
         target=args.target,
