@@ -5,7 +5,8 @@ diagnosis on curves CalculiX made, the built-in solver as its prior.
   at two bending lengths (10 and 15 mm), noise 0.05 N (stated in the study);
   ``surrogate.calibrate`` sees only the CSV. Reported: CalculiX runs and built-in runs,
   RMSE over the truth's own RMSE on the same data (the truth's curves from CalculiX),
-  the errors of D and Mp, status and misfit, wall time. Targets (issue 16): the noise
+  the errors of D and Mp and whether the truth's D and Mp lie within the 95 % intervals the
+  calibration states, status and misfit, wall time. Targets (issue 16): the noise
   floor — RMSE ≤ 1.05 × the truth's, D and Mp within 5 % — in ≤ 30 CalculiX runs.
   Beside it, after the calibration, what CalculiX's own scatter leaves of that floor:
   the RMSE of the truth's neighbours 1 % thinner and thicker at the same D and Mp
@@ -175,6 +176,14 @@ def calibration_case(task: tuple[str, Path, int]) -> dict[str, Any]:
     ]
     (d, mp), (d0, mp0) = coat_section(result.params, 1.2), coat_section(truth, 1.2)
     mf = result.multi_fidelity or {}
+    combinations = (result.determination or {}).get("combinations", {})
+    covered = {  # the truth inside the 95 % interval the product states (None: not stated)
+        label: _inside(truth_value, combinations.get(key))
+        for label, key, truth_value in (
+            ("D", "bending_stiffness_nmm", d0),
+            ("Mp", "plastic_moment_n", mp0),
+        )
+    }
     return {
         "kind": "calibration",
         "set": name,
@@ -184,6 +193,7 @@ def calibration_case(task: tuple[str, Path, int]) -> dict[str, Any]:
         "neighbours_over_truth": [n.rmse_n / at_truth for n in neighbours],
         "d_error": d / d0 - 1.0,
         "mp_error": mp / mp0 - 1.0,
+        "truth_covered": covered,
         "status": result.status,
         "misfit": result.misfit,
         "correction": mf.get("correction"),
@@ -192,6 +202,14 @@ def calibration_case(task: tuple[str, Path, int]) -> dict[str, Any]:
         "message": result.message,
         "retried": result.retried,
     }
+
+
+def _inside(value: float, combination: dict[str, Any] | None) -> bool | None:
+    """``value`` within the stated 95 % interval of a combination; None where the
+    calibration states none (not converged) or the curves do not determine it at all."""
+    if combination is None or combination.get("low") is None:
+        return None
+    return combination["low"] <= value <= combination["high"]
 
 
 def diagnosis_case(task: tuple[str, Path, int]) -> dict[str, Any]:
@@ -253,6 +271,12 @@ def _print(row: dict[str, Any]) -> None:
         print(
             f"  the truth's neighbours (Tcoat ∓{100 * NEIGHBOUR:g} %, same D and Mp): "
             f"RMSE/truth {low:.3f}, {high:.3f}",
+            flush=True,
+        )
+        said = {True: "yes", False: "NO", None: "no interval stated"}
+        print(
+            "  the truth within the product's 95 % intervals: "
+            + ", ".join(f"{k} {said[v]}" for k, v in row["truth_covered"].items()),
             flush=True,
         )
         for test_id, why in (row.get("retried") or {}).items():  # at the answer
