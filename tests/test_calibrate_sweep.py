@@ -73,10 +73,25 @@ def test_a_budget_too_small_says_budget_exhausted_and_claims_nothing(tmp_path):
     result = surrogate.calibrate(path, max_solver_calls=20, progress=False)
     assert result.status == "budget_exhausted"
     assert result.solver_calls <= 20
+    assert result.rmse_n > 1.2 * result.noise_n  # the best point so far fails the F-test
     assert result.misfit is None and result.misfit_p_value is None
     assert result.determination is None
     assert "raise --budget" in result.message and "converged" not in result.message
     assert "within the noise" not in result.message
+
+
+def test_a_budget_spent_at_a_point_within_the_noise_says_the_model_fits_but_not_where(tmp_path):
+    """Two more runs and the best verified point passes the F-test (RMSE 0.99 × the
+    noise, p 0.54 here) before the first-order test holds: a local optimum fits at
+    least as well, so the misfit is stated; what the curves determine is not."""
+    path = write_calibration_study(tmp_path, SETS["mid-n1"])
+    result = surrogate.calibrate(path, max_solver_calls=22, progress=False)
+    assert result.status == "budget_exhausted"
+    assert result.misfit == "within the noise" and result.misfit_p_value >= 0.01
+    assert result.determination is None and result.predicted_gain is None
+    assert "raise --budget" in result.message and "converged" not in result.message
+    assert "already within the noise" in result.message
+    assert "stated only at a verified local optimum" in result.message
 
 
 def _calibrate_in_a_process(path, threads):

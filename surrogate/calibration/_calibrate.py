@@ -73,7 +73,11 @@ class CalibrationResult:
     :class:`~surrogate.calibration._determination.Determination`: 95 % intervals of the
     bending stiffness ``bending_stiffness_nmm`` [N·mm per unit width], the plastic
     moment ``plastic_moment_n`` [N·mm/mm = N] and each parameter, the free
-    parameters, those held at a bound). Both are ``None`` unless ``converged``.
+    parameters, those held at a bound). ``determination`` is ``None`` unless
+    ``converged``. With ``budget_exhausted``, ``misfit`` is ``"within the noise"``
+    where the best verified point already passes the F-test (a local optimum would fit
+    at least as well: the model is not shown to miss anything), else ``None``: a
+    misfit there may be the search's, not the model's.
 
     ``multi_fidelity`` (None for a built-in study): with an external full solver the
     corrected built-in model is searched (:mod:`surrogate.calibration._fidelity`);
@@ -232,6 +236,9 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
         p_value = loop.p_value(fit)
         misfit = "within the noise" if p_value >= SIGNIFICANCE else "systematic"
         determination = determination_at(problem, fit).to_json()
+    elif loop.p_value_at(best) >= SIGNIFICANCE:  # the optimum fits at least as well
+        p_value = loop.p_value_at(best)
+        misfit = "within the noise"
     result = CalibrationResult(
         params=dict(zip(problem.space.names, map(float, best.theta), strict=True)),
         rmse_n=float(best.rmse),
@@ -326,7 +333,14 @@ def _message(problem: CalibrationProblem, result: CalibrationResult, fit: LocalF
     )
     why = unconverged_reason(result, fit)
     if why is not None:
-        return f"{text} ({why}; best verified point so far — raise --budget)"
+        text = f"{text} ({why}; best verified point so far — raise --budget)"
+        if result.misfit is None:
+            return text
+        return (
+            f"{text}; its misfit is already within the noise (F-test p = "
+            f"{result.misfit_p_value:.2g}), so a local optimum fits at least as well; "
+            "what the curves determine is stated only at a verified local optimum"
+        )
     assert result.determination is not None
     return (
         f"{text} ({fit.message if fit else ''}); {result.misfit} (F-test p = "

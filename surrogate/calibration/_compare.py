@@ -262,7 +262,12 @@ def _calibration_summary(stored: Mapping[str, Any] | None) -> str:
     if stored is None:
         return ""
     if stored.get("status") != "converged" or not stored.get("determination"):
-        return f"; calibration {stored.get('status')}: not at a verified local optimum"
+        fits = (
+            f", its misfit {stored['misfit']} (p = {stored['misfit_p_value']:.2g})"
+            if stored.get("misfit")
+            else ""
+        )
+        return f"; calibration {stored.get('status')}: not at a verified local optimum{fits}"
     return (
         f"; calibration converged, {stored['misfit']} (p = {stored['misfit_p_value']:.2g}); "
         f"{stored['determination']['statement']}"

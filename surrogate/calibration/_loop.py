@@ -311,9 +311,15 @@ class CalibrationLoop:
 
     def p_value(self, fit: LocalFit) -> float:
         """F-test of the fit's misfit against the noise (small: systematic)."""
-        rss = float(fit.residual @ fit.residual)
-        dof = self.problem.n_points - len(fit.theta)
-        return misfit_p_value(rss, dof, self.noise, self.dof_noise)
+        return self._p_value(float(fit.residual @ fit.residual), len(fit.theta))
+
+    def p_value_at(self, point: VerifiedPoint) -> float:
+        """The same test at a verified point that need not be a fit's optimum. Its RSS is
+        at least the optimum's, so where it passes, the optimum's passes as well."""
+        return self._p_value(point.rmse**2 * self.problem.n_points, len(point.theta))
+
+    def _p_value(self, rss: float, n_params: int) -> float:
+        return misfit_p_value(rss, self.problem.n_points - n_params, self.noise, self.dof_noise)
 
     def _valley_starts(self) -> list[np.ndarray]:
         """Both ends of the least determined direction, when the misfit is near the noise
