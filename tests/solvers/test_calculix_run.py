@@ -3,8 +3,8 @@ the main loop (``surrogate run``) end to end with ``kind = "calculix"`` (the bui
 solver its prior).
 
 Marked ``calculix``: they need ``ccx`` (skipped without it on a user's machine,
-a failure in CI). 6.5 minutes in one process beside two other ccx runs (2-core AMD
-EPYC, 2026-11-25); less with ``-n 2`` on a quiet machine.
+a failure in CI). About 5.6 minutes of test time in the suite (``-n 2``, 2-core AMD
+EPYC, 2026-11-26): the three 0–90° tests 66–98 s each, the retry tests ~25 s each.
 """
 
 from concurrent.futures import ThreadPoolExecutor
