@@ -236,9 +236,8 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
         p_value = loop.p_value(fit)
         misfit = "within the noise" if p_value >= SIGNIFICANCE else "systematic"
         determination = determination_at(problem, fit).to_json()
-    elif loop.p_value_at(best) >= SIGNIFICANCE:  # the optimum fits at least as well
-        p_value = loop.p_value_at(best)
-        misfit = "within the noise"
+    elif (at_best := loop.p_value_at(best)) >= SIGNIFICANCE:  # an optimum fits as well
+        p_value, misfit = at_best, "within the noise"
     result = CalibrationResult(
         params=dict(zip(problem.space.names, map(float, best.theta), strict=True)),
         rmse_n=float(best.rmse),
