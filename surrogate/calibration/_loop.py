@@ -314,8 +314,9 @@ class CalibrationLoop:
         return self._p_value(float(fit.residual @ fit.residual), len(fit.theta))
 
     def p_value_at(self, point: VerifiedPoint) -> float:
-        """The same test at a verified point that need not be a fit's optimum. Its RSS is
-        at least the optimum's, so where it passes, the optimum's passes as well."""
+        """The same test at a verified point that need not be a fit's optimum. A local
+        optimum reached by descending from it has an RSS no larger (the same degrees of
+        freedom), so where the point passes, that optimum passes as well."""
         return self._p_value(point.rmse**2 * self.problem.n_points, len(point.theta))
 
     def _p_value(self, rss: float, n_params: int) -> float:

@@ -277,7 +277,7 @@ def _calibrated(
         says=[
             f"study {name}, solver {spec.solver}, calibration {result.get('status')}: "
             f"RMSE {result['rmse_n']:.4g} N (noise {result['noise_n']:.4g} N), "
-            f"misfit {result.get('misfit') or 'not judged'}",
+            f"misfit {result.get('misfit') or 'not stated'}",
             f"calibrated coat Ecoat {coat[0]:.6g} GPa, Scoat {coat[1]:.6g} GPa, "
             f"Tcoat {coat[2]:.6g} mm; the card's coat evaluated at {at}",
         ],

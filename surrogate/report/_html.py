@@ -283,7 +283,7 @@ def _calibration(findings: Findings) -> str:
         "misfit against the noise": (
             f"{record['misfit']} (F-test p = {record['misfit_p_value']:.2g})"
             if record.get("misfit")
-            else "not judged (not converged)"
+            else "not stated (not converged)"
         ),
         "full-solver runs": record["solver_calls"],
     }
