@@ -45,6 +45,7 @@ sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != 
 
 import surrogate  # noqa: E402
 from benchmarks._machine import machine  # noqa: E402
+from benchmarks._truth import inside  # noqa: E402
 from surrogate import Rig  # noqa: E402
 from surrogate.calibration._problem import coat_section  # noqa: E402
 from surrogate.calibration._synthetic import calibration_sets, write_calibration_study  # noqa: E402
@@ -99,8 +100,7 @@ def calibrate_case(task: tuple[dict[str, Any], int]) -> dict[str, Any]:
             ("bending_stiffness_nmm", d0, "d"),
             ("plastic_moment_n", mp0, "mp"),
         ):
-            low, high = combos[key]["low"], combos[key]["high"]
-            row[f"{label}_covered"] = low is not None and low <= truth_value <= high
+            row[f"{label}_covered"] = inside(truth_value, combos[key]) is True
             row[f"{label}_half_width"] = combos[key]["relative_half_width"]
     row["at_floor"] = (
         row["rmse_over_truth"] <= NOISE_FLOOR

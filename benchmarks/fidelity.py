@@ -56,6 +56,7 @@ sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != 
 
 import surrogate  # noqa: E402
 from benchmarks._machine import machine  # noqa: E402
+from benchmarks._truth import inside  # noqa: E402
 from surrogate.calibration._problem import coat_section  # noqa: E402
 from surrogate.calibration._synthetic import synthetic_measurements  # noqa: E402
 
@@ -178,7 +179,7 @@ def calibration_case(task: tuple[str, Path, int]) -> dict[str, Any]:
     mf = result.multi_fidelity or {}
     combinations = (result.determination or {}).get("combinations", {})
     covered = {  # the truth inside the 95 % interval the product states (None: not stated)
-        label: _inside(truth_value, combinations.get(key))
+        label: inside(truth_value, combinations.get(key))
         for label, key, truth_value in (
             ("D", "bending_stiffness_nmm", d0),
             ("Mp", "plastic_moment_n", mp0),
@@ -202,14 +203,6 @@ def calibration_case(task: tuple[str, Path, int]) -> dict[str, Any]:
         "message": result.message,
         "retried": result.retried,
     }
-
-
-def _inside(value: float, combination: dict[str, Any] | None) -> bool | None:
-    """``value`` within the stated 95 % interval of a combination; None where the
-    calibration states none (not converged) or the curves do not determine it at all."""
-    if combination is None or combination.get("low") is None:
-        return None
-    return combination["low"] <= value <= combination["high"]
 
 
 def diagnosis_case(task: tuple[str, Path, int]) -> dict[str, Any]:
