@@ -261,17 +261,13 @@ def _calibration_summary(stored: Mapping[str, Any] | None) -> str:
     """What the stored calibration claims: its status, misfit and what the curves determine."""
     if stored is None:
         return ""
-    if stored.get("status") != "converged" or not stored.get("determination"):
-        fits = (
-            f", its misfit {stored['misfit']} (p = {stored['misfit_p_value']:.2g})"
-            if stored.get("misfit")
-            else ""
-        )
-        return f"; calibration {stored.get('status')}: not at a verified local optimum{fits}"
-    return (
-        f"; calibration converged, {stored['misfit']} (p = {stored['misfit_p_value']:.2g}); "
-        f"{stored['determination']['statement']}"
+    misfit = (
+        f"{stored['misfit']} (p = {stored['misfit_p_value']:.2g})" if stored.get("misfit") else ""
     )
+    if stored.get("status") != "converged" or not stored.get("determination"):
+        fits = f", its misfit {misfit}" if misfit else ""
+        return f"; calibration {stored.get('status')}: not at a verified local optimum{fits}"
+    return f"; calibration converged, {misfit}; {stored['determination']['statement']}"
 
 
 def _parameters(
