@@ -84,8 +84,15 @@ def test_paper_design_without_run(workdir):
     assert len(pd.read_csv(workdir / "paper.csv")) == 64
 
 
-def test_fit_prints_cv_and_json(workdir):
-    result = _run("fit", "samples.csv", "--out", "model.json", cwd=workdir)
+@pytest.fixture(scope="module")
+def fitted(workdir):
+    """``surrogate fit`` of the samples, once for the module: its output, and
+    ``model.json`` in ``workdir``."""
+    return _run("fit", "samples.csv", "--out", "model.json", cwd=workdir)
+
+
+def test_fit_prints_cv_and_json(workdir, fitted):
+    result = fitted
     assert result.returncode == 0, result.stderr
     assert "LOO median rel err" in result.stdout and "f60_n" in result.stdout
     payload = json.loads(_run("fit", "samples.csv", "--json", cwd=workdir).stdout)
@@ -93,8 +100,7 @@ def test_fit_prints_cv_and_json(workdir):
         assert set(payload[output]) == {"loo_median_rel_err", "loo_mae", "coverage95"}
 
 
-def test_predict_adds_columns(workdir):
-    _run("fit", "samples.csv", "--out", "model.json", cwd=workdir)
+def test_predict_adds_columns(workdir, fitted):
     _run("doe", "--design", "sobol", "--n", "4", "--seed", "9", "--out", "points.csv", cwd=workdir)
     result = _run("predict", "model.json", "points.csv", "--out", "pred.csv", cwd=workdir)
     assert result.returncode == 0, result.stderr
@@ -113,8 +119,7 @@ BAD_POINTS = {
 
 
 @pytest.mark.parametrize("kind", sorted(BAD_POINTS))
-def test_bad_points_file_is_refused_and_nothing_written(workdir, kind, tmp_path):
-    _run("fit", "samples.csv", "--out", "model.json", cwd=workdir)
+def test_bad_points_file_is_refused_and_nothing_written(workdir, fitted, kind, tmp_path):
     bad = tmp_path / "bad.csv"
     bad.write_text(BAD_POINTS[kind])
     (tmp_path / "model.json").write_bytes((workdir / "model.json").read_bytes())
