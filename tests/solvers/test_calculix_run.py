@@ -3,8 +3,10 @@ the main loop (``surrogate run``) end to end with ``kind = "calculix"`` (the bui
 solver its prior).
 
 Marked ``calculix``: they need ``ccx`` (skipped without it on a user's machine,
-a failure in CI). About 5.6 minutes of test time in the suite (``-n 2``, 2-core AMD
-EPYC, 2026-11-26): the three 0–90° tests 66–98 s each, the retry tests ~25 s each.
+a failure in CI). Alone, one after another (``-n 0``, 2-core AMD EPYC, 2026-11-26):
+the retry tests (15–18°) 4–17 s each, 48 s together (at 30° they took 80 s; the
+agreement test to 90° with its retry 93 s, to 87° one run); in the suite the
+thick-soft coat's three runs at once and the main loop take 60–85 s each.
 """
 
 from concurrent.futures import ThreadPoolExecutor
@@ -274,9 +276,7 @@ def test_a_retry_is_the_first_attempt_up_to_where_it_stopped(ccx, tmp_path):
     rig = Rig(max_angle_deg=18.0, tension_n=20.0)
     first = tmp_path / "first.dat"
     script = tmp_path / "stopping-ccx"
-    script.write_text(
-        STOPPING_CCX.format(python=sys.executable, ccx=ccx, keep=8, first=str(first))
-    )
+    script.write_text(STOPPING_CCX.format(python=sys.executable, ccx=ccx, keep=8, first=str(first)))
     script.chmod(0o755)
     settings = {"mesh": "coarse", "timeout_s": 900, "command": str(script)}
     inputs = solver_inputs(POINT, rig, solver="calculix", solver_settings=settings)
