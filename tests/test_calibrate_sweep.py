@@ -94,6 +94,31 @@ def test_a_budget_spent_at_a_point_within_the_noise_says_the_model_fits_but_not_
     assert "stated only at a verified local optimum" in result.message
 
 
+def test_a_budget_spent_at_a_bound_of_a_range_says_so_and_what_would_tell(tmp_path):
+    """Ecoat ≤ 1 GPa and Tcoat ≤ 0.015 mm cannot make the truth's bending stiffness
+    (1.2 GPa, 0.02 mm): the fit runs into the bounds before the budget is spent, and
+    the message names each parameter at a bound — and none that is not — and says a
+    wider range would tell. (Swept by hand, seeds 0–5 at 24, 30 and 36 runs: every
+    unconverged point at a bound said so, the one inside the ranges said nothing.)"""
+    path = write_calibration_study(tmp_path, SETS["mid-n1"])
+    text = path.read_text().replace("low = 0.5,  high = 4.0", "low = 0.5,  high = 1.0")
+    path.write_text(text.replace("low = 0.01, high = 0.1", "low = 0.01, high = 0.015"))
+    result = surrogate.calibrate(path, max_solver_calls=30, progress=False)
+    assert result.status == "budget_exhausted", result.message
+    highs = {"Ecoat": ("ecoat_gpa", 1.0), "Scoat": ("scoat_gpa", 0.4), "Tcoat": ("tcoat_mm", 0.015)}
+    at_bound = {
+        label
+        for label, (name, high) in highs.items()
+        if result.params[name] == pytest.approx(high, rel=1e-9)
+    }
+    assert at_bound, result.params  # E·T short of the truth's: the fit pushes out
+    for label in highs:
+        said = f"{label} at its upper bound" in result.message
+        assert said == (label in at_bound), (label, result.message)
+    assert "the search stops at the declared ranges: widen" in result.message
+    assert "lower bound" not in result.message
+
+
 def _calibrate_in_a_process(path, threads):
     """The calibrated parameters from a fresh interpreter with ``threads`` BLAS threads."""
     env = {**os.environ, "OPENBLAS_NUM_THREADS": str(threads), "OMP_NUM_THREADS": str(threads)}

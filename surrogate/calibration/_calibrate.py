@@ -28,6 +28,7 @@ from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import distributions, quiet_optuna
 from ..storage._storage import open_storage
 from ..study._spec import StudySpec
+from ._determination import at_bound_text
 from ._fidelity import LOW_FIDELITY_BUDGET, CorrectedCalibration, CorrectedRuns, CurveCorrection
 from ._local import LocalFit
 from ._loop import CalibrationLoop, SolverRuns, VerifiedPoint, determination_at
@@ -49,6 +50,7 @@ __all__ = [
 ]
 
 _LOG = logging.getLogger(__name__)
+BOUND_UNIT = 1e-9  # a parameter within this share of its range from a bound is at the bound
 
 
 # -- the result --------------------------------------------------------------------------------
@@ -333,6 +335,7 @@ def _message(problem: CalibrationProblem, result: CalibrationResult, fit: LocalF
     why = unconverged_reason(result, fit)
     if why is not None:
         text = f"{text} ({why}; best verified point so far — raise --budget)"
+        text += _at_bounds(problem, result.params)
         if result.misfit is None:
             return text
         return (
@@ -344,6 +347,25 @@ def _message(problem: CalibrationProblem, result: CalibrationResult, fit: LocalF
     return (
         f"{text} ({fit.message if fit else ''}); {result.misfit} (F-test p = "
         f"{result.misfit_p_value:.2g}); {result.determination['statement']}"
+    )
+
+
+def _at_bounds(problem: CalibrationProblem, params: Mapping[str, float]) -> str:
+    """Where the best point of an unconverged calibration lies on a bound of a declared
+    range, that it does and what would tell ("" where none does): the search does not
+    look beyond the range, and a better fit may lie there (or in another basin)."""
+    unit = problem.space.to_unit(np.array([[params[name] for name in problem.space.names]]))[0]
+    on = [
+        at_bound_text(name, -1 if u <= 0.5 else 1, params[name], "at")
+        for name, u in zip(problem.space.names, unit, strict=True)
+        if min(u, 1.0 - u) <= BOUND_UNIT
+    ]
+    if not on:
+        return ""
+    return (
+        f"; its {' and '.join(on)} — the search stops at the declared ranges: widen "
+        f"{'them' if len(on) > 1 else 'it'} in the study file to see whether a fit beyond "
+        "is better"
     )
 
 

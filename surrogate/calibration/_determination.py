@@ -47,6 +47,13 @@ NULL_EIGENVALUE = 1e-12  # relative to the largest: numerically singular
 _LABELS = {"ecoat_gpa": "Ecoat", "scoat_gpa": "Scoat", "tcoat_mm": "Tcoat"}
 
 
+def at_bound_text(name: str, side: int, value: float, verb: str = "held at") -> str:
+    """The words for a parameter at a bound of its declared range (``side`` −1 lower,
+    +1 upper), e.g. "Ecoat held at its lower bound 0.5"."""
+    side_name = "lower" if side < 0 else "upper"
+    return f"{_LABELS.get(name, name)} {verb} its {side_name} bound {value:.4g}"
+
+
 @dataclass(frozen=True)
 class Determination:
     """What the curves determine at a calibrated point (fields are its JSON keys).
@@ -304,8 +311,7 @@ def _statement(
         text += f"; {label} apart {'are' if len(free) > 1 else 'is'} free within the ranges"
     for k, name in enumerate(names):
         if name in held:
-            side = "lower" if at_bound[k] < 0 else "upper"
-            text += f"; {_LABELS.get(name, name)} held at its {side} bound {theta[k]:.4g}"
+            text += "; " + at_bound_text(name, int(at_bound[k]), theta[k])
     effect_parts = [
         f"{name} {theta[k]:.3g} [{intervals[name][0]:.3g}, {intervals[name][1]:.3g}]"  # type: ignore[index]
         for k, name in enumerate(names)
