@@ -111,6 +111,31 @@ def test_a_parameter_at_its_bound_is_held_and_said_so():
     assert "a held at its lower bound 0.01" in found.statement
 
 
+def test_a_combination_of_parameters_all_held_at_bounds_is_not_determined():
+    """exp(a) with ``a`` held at its bound: the range holds it, the curves do not — no
+    interval (it had read "to ±0 %"); exp(a + b) keeps the interval ``b`` gives it."""
+    X, residual, z_hat = _linear_problem(0)
+    combinations = {
+        "a_only": ("exp(a)", lambda p: math.exp(p["a"])),
+        **SUM,
+    }
+    found = determine(
+        NAMES,
+        np.array([-10.0, -10.0]),
+        np.array([10.0, 10.0]),
+        np.array([False, False]),
+        np.array([-10.0, z_hat[1]]),
+        -X * 20.0,
+        residual,
+        np.array([-1, 0]),
+        combinations=combinations,
+    )
+    assert found.combinations["a_only"]["relative_half_width"] is None
+    assert found.combinations["a_only"]["value"] == pytest.approx(math.exp(-10.0))
+    assert found.combinations["sum"]["relative_half_width"] > 0.0
+    assert "exp(a) to" not in found.statement and "exp(a + b) to ±" in found.statement
+
+
 @pytest.mark.parametrize("seed", range(5))
 def test_the_first_order_test_is_zero_at_an_optimum_and_not_away_from_it(seed):
     X, residual, _ = _linear_problem(seed)

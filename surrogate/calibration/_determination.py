@@ -45,6 +45,9 @@ FREE_SHARE = 0.25  # a 95 % interval this wide a share of the range: the lineari
 # valley gives 40–50 %, determined parameters < 1 %)
 NULL_EIGENVALUE = 1e-12  # relative to the largest: numerically singular
 _LABELS = {"ecoat_gpa": "Ecoat", "scoat_gpa": "Scoat", "tcoat_mm": "Tcoat"}
+# a combination loading its free parameters by no more than this share of its largest load
+# is held by the bounds (D = f(Ecoat, Tcoat) with both at a bound: not "±0 %")
+HELD_LOAD = 1e-9
 
 
 def at_bound_text(name: str, side: int, value: float, verb: str = "held at") -> str:
@@ -270,13 +273,14 @@ def _combination(
         return math.log(function(dict(zip(names, map(float, theta), strict=True))))
 
     step = 1e-6
-    gradient = np.array(
-        [
-            (log_value(z + step * e) - log_value(z - step * e)) / (2 * step)
-            for e in np.eye(z.size)[free_index]
-        ]
+    every = np.array(
+        [(log_value(z + step * e) - log_value(z - step * e)) / (2 * step) for e in np.eye(z.size)]
     )
+    gradient = every[free_index]
     value = math.exp(log_value(z))
+    if not np.any(np.abs(gradient) > HELD_LOAD * np.abs(every).max(initial=0.0)):
+        # every parameter it depends on is held at a bound: the range holds it, not the curves
+        return {"value": value, "low": None, "high": None, "relative_half_width": None}
     sd, move = covariance.spread(gradient, span[free_index])
     half = t * sd + move  # the valley's move within the ranges: a share of it, not a variance
     if not half < 700.0:  # inf, or exp would overflow: a direction the curves do not determine
