@@ -30,7 +30,7 @@ from ..storage._storage import open_storage
 from ..study._spec import StudySpec
 from ._determination import at_bound_text
 from ._fidelity import LOW_FIDELITY_BUDGET, CorrectedCalibration, CorrectedRuns, CurveCorrection
-from ._local import LocalFit
+from ._local import LocalFit, bound_sides
 from ._loop import CalibrationLoop, SolverRuns, VerifiedPoint, determination_at
 from ._problem import (
     CalibrationProblem,
@@ -50,7 +50,6 @@ __all__ = [
 ]
 
 _LOG = logging.getLogger(__name__)
-BOUND_UNIT = 1e-9  # a parameter within this share of its range from a bound is at the bound
 
 
 # -- the result --------------------------------------------------------------------------------
@@ -344,28 +343,38 @@ def _message(problem: CalibrationProblem, result: CalibrationResult, fit: LocalF
             "what the curves determine is stated only at a verified local optimum"
         )
     assert result.determination is not None
+    held = [n for n in result.determination["held_at_bound"] if n in problem.spec.space.names]
     return (
         f"{text} ({fit.message if fit else ''}); {result.misfit} (F-test p = "
         f"{result.misfit_p_value:.2g}); {result.determination['statement']}"
+        + (f" — {_widen(len(held))}" if held else "")
     )
 
 
 def _at_bounds(problem: CalibrationProblem, params: Mapping[str, float]) -> str:
-    """Where the best point of an unconverged calibration lies on a bound of a declared
-    range, that it does and what would tell ("" where none does): the search does not
-    look beyond the range, and a better fit may lie there (or in another basin)."""
-    unit = problem.space.to_unit(np.array([[params[name] for name in problem.space.names]]))[0]
+    """Where the best point of an unconverged calibration lies on a bound of a range the
+    study file declares, that it does and what would tell ("" where none does): the
+    search does not look beyond it, and a better fit may lie there (or in another basin).
+    An effect's parameters are left out: their ranges are the effect's own (0 is the
+    effect switched off), not the study's to widen."""
+    space = problem.spec.space
+    sides = bound_sides(space.to_unit(np.array([[params[name] for name in space.names]]))[0])
     on = [
-        at_bound_text(name, -1 if u <= 0.5 else 1, params[name], "at")
-        for name, u in zip(problem.space.names, unit, strict=True)
-        if min(u, 1.0 - u) <= BOUND_UNIT
+        at_bound_text(p.name, int(side), p.low if side < 0 else p.high, "at")
+        for p, side in zip(space, sides, strict=True)
+        if side != 0
     ]
     if not on:
         return ""
+    listed = on[0] if len(on) == 1 else f"{', '.join(on[:-1])} and {on[-1]}"
+    return f"; its {listed} — {_widen(len(on))}"
+
+
+def _widen(count: int) -> str:
+    """What would tell whether a fit beyond ``count`` ranges of the study file is better."""
     return (
-        f"; its {' and '.join(on)} — the search stops at the declared ranges: widen "
-        f"{'them' if len(on) > 1 else 'it'} in the study file to see whether a fit beyond "
-        "is better"
+        f"the search stops at the declared ranges: widen {'them' if count > 1 else 'it'} "
+        "in the study file to see whether a fit beyond is better"
     )
 
 

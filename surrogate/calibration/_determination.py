@@ -50,11 +50,11 @@ _LABELS = {"ecoat_gpa": "Ecoat", "scoat_gpa": "Scoat", "tcoat_mm": "Tcoat"}
 HELD_LOAD = 1e-9
 
 
-def at_bound_text(name: str, side: int, value: float, verb: str = "held at") -> str:
-    """The words for a parameter at a bound of its declared range (``side`` −1 lower,
-    +1 upper), e.g. "Ecoat held at its lower bound 0.5"."""
+def at_bound_text(name: str, side: int, bound: float, verb: str = "held at") -> str:
+    """The words for a parameter at a bound of its range (``side`` −1 lower, +1 upper;
+    ``bound`` the range's end), e.g. "Ecoat held at its lower bound 0.5"."""
     side_name = "lower" if side < 0 else "upper"
-    return f"{_LABELS.get(name, name)} {verb} its {side_name} bound {value:.4g}"
+    return f"{_LABELS.get(name, name)} {verb} its {side_name} bound {bound:.4g}"
 
 
 @dataclass(frozen=True)
@@ -135,7 +135,8 @@ def determine(
         for key, (_, function) in combinations.items()
     }
     labels = {key: label for key, (label, _) in combinations.items()}
-    statement = _statement(names, theta, intervals, found, labels, free, held, at_bound)
+    ends = np.where(np.asarray(at_bound) < 0, low, high)  # the bound each held one is at
+    statement = _statement(names, theta, intervals, found, labels, free, held, at_bound, ends)
     return Determination(
         sigma_n=covariance.sigma,
         dof=dof,
@@ -302,6 +303,7 @@ def _statement(
     free: Sequence[str],
     held: Sequence[str],
     at_bound: np.ndarray,
+    ends: np.ndarray,
 ) -> str:
     parts = [
         f"{labels[key]} to ±{100 * c['relative_half_width']:.2g} %"
@@ -315,7 +317,7 @@ def _statement(
         text += f"; {label} apart {'are' if len(free) > 1 else 'is'} free within the ranges"
     for k, name in enumerate(names):
         if name in held:
-            text += "; " + at_bound_text(name, int(at_bound[k]), theta[k])
+            text += "; " + at_bound_text(name, int(at_bound[k]), float(ends[k]))
     effect_parts = [
         f"{name} {theta[k]:.3g} [{intervals[name][0]:.3g}, {intervals[name][1]:.3g}]"  # type: ignore[index]
         for k, name in enumerate(names)

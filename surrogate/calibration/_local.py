@@ -508,15 +508,20 @@ def _result(
         residual=residual,
         curves=curves,  # type: ignore[arg-type]
         jacobian=jac,
-        # within a hair of a bound (trf keeps its iterates strictly inside), or what
-        # least_squares itself reports as an active bound
-        at_bound=np.where(
-            unit <= AT_BOUND_UNIT, -1, np.where(unit >= 1 - AT_BOUND_UNIT, 1, active)
-        ),
+        # within a hair of a bound, or what least_squares itself reports as an active bound
+        at_bound=np.where(bound_sides(unit) != 0, bound_sides(unit), active),
         predicted_gain=None if test is None else test.predicted_gain,
         converged=converged,
         message=message,
     )
+
+
+def bound_sides(unit: np.ndarray) -> np.ndarray:
+    """−1/+1 where a point (declared unit coordinates) lies at the lower/upper bound of a
+    range, else 0: within ``AT_BOUND_UNIT`` of it (trf keeps its iterates strictly inside:
+    each step stops short of a bound, so a fit pressed against one ends a hair from it)."""
+    unit = np.asarray(unit, dtype=float)
+    return np.where(unit <= AT_BOUND_UNIT, -1, np.where(unit >= 1 - AT_BOUND_UNIT, 1, 0))
 
 
 def gain_tolerance(n_points: int, n_parameters: int, chi2: float = FIRST_ORDER_CHI2) -> float:

@@ -88,7 +88,9 @@ def test_paper_design_without_run(workdir):
 def fitted(workdir):
     """``surrogate fit`` of the samples, once for the module: its output, and
     ``model.json`` in ``workdir``."""
-    return _run("fit", "samples.csv", "--out", "model.json", cwd=workdir)
+    result = _run("fit", "samples.csv", "--out", "model.json", cwd=workdir)
+    assert result.returncode == 0, result.stderr  # else every test using it says why
+    return result
 
 
 def test_fit_prints_cv_and_json(workdir, fitted):
