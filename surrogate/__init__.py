@@ -6,7 +6,7 @@ of the same name. Heavy parts (scikit-learn, pandas, Optuna) load on first use.
 The packages, top down (a package imports from its own row or the rows below)::
 
     _cli.py → this API (here)
-      → report/       one HTML page of what a study's storage holds
+      → reporting/    one HTML page of what a study's storage holds (the function: report)
       → identify/     the main job: loop, verify study, workers, export
         calibration/  measurements → calibrate → compare → diagnose
       → solvers/ (builtin, CalculiX, LS-DYNA), gp/, effects/, study/, storage/
@@ -45,8 +45,8 @@ _LAZY = {
     "compare": ".calibration",
     "ExportResult": ".identify",
     "export": ".identify",
-    "ReportResult": ".report",
-    "report": ".report",
+    "ReportResult": ".reporting",
+    "report": ".reporting",
     "Effect": ".effects",
     "EffectParameter": ".effects",
     "ModelState": ".effects",

@@ -664,7 +664,7 @@ def _add_report(commands: _Subparsers) -> argparse.ArgumentParser:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from .report import report
+    from .reporting import report
 
     result = report(args.study, output=args.output, storage=args.storage, plugins=args.plugin)
     if args.json:

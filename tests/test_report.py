@@ -276,3 +276,17 @@ def test_without_plotly_the_report_says_how_to_get_it(tmp_path, capsys, monkeypa
     monkeypatch.setitem(sys.modules, "plotly", None)  # import plotly raises ImportError
     assert "pip install 'webbing-surrogate[plots]'" in _refused([study], capsys)
     assert not (tmp_path / "coat-report.html").exists()
+
+
+def test_the_api_report_is_the_function_whichever_import_came_first():
+    """``surrogate.report`` stays the function after the CLI (or anyone) imported the
+    package that holds it: the package is ``surrogate.reporting``. Named ``report``,
+    its import set ``surrogate.report`` to the package, and the suite's
+    ``surrogate.report(study)`` failed ("'module' object is not callable") wherever an
+    in-process ``surrogate report`` command had run first in the same process."""
+    code = (
+        "import surrogate, surrogate.reporting\n"
+        "assert surrogate.report is surrogate.reporting.report, surrogate.report\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
