@@ -67,8 +67,9 @@ class Determination:
     each parameter, clipped to its range (``None`` where it is held at a bound);
     ``free``: parameters whose linearised interval spans ≥ ``FREE_SHARE`` of the
     range (their interval is then the whole range); a
-    combination along a direction the curves do not determine at all has
-    ``None`` bounds; ``held_at_bound``: parameters the fit
+    combination along a direction the curves do not determine at all, or of
+    parameters all held at a bound (the ranges hold it), has ``None`` bounds;
+    ``held_at_bound``: parameters the fit
     holds at a bound of their range; ``directions``: eigen-directions of the
     covariance in the declared scale, best determined first, each with its 95 %
     ``half_width`` (in ``z``; ``None``: not determined) and ``weights`` (largest
