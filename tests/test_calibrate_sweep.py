@@ -18,6 +18,7 @@ import pytest
 
 import surrogate
 from surrogate import Rig
+from surrogate.calibration._calibrate import calibration_note
 from surrogate.calibration._local import bound_sides
 from surrogate.calibration._problem import coat_section
 from surrogate.calibration._synthetic import calibration_sets, write_calibration_study
@@ -130,6 +131,8 @@ def test_a_budget_spent_at_a_bound_of_a_range_says_so_and_what_would_tell(tmp_pa
     assert done.status == "converged", done.message
     assert set(done.determination["held_at_bound"]) == {"ecoat_gpa", "tcoat_mm"}
     assert done.determination["combinations"]["bending_stiffness_nmm"]["low"] is None
+    note = "\n".join(calibration_note(done.to_json()))  # the dashboard's and the report's words
+    assert "| bending_stiffness_nmm | " in note and "| held by the ranges (its" in note
     assert done.message.endswith(
         "Tcoat held at its upper bound 0.015 — the search stops at the declared ranges: "
         "widen them in the study file to see whether a fit beyond is better"

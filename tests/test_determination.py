@@ -131,6 +131,8 @@ def test_a_combination_of_parameters_all_held_at_bounds_is_not_determined():
         combinations=combinations,
     )
     assert found.combinations["a_only"]["relative_half_width"] is None
+    assert found.combinations["a_only"]["held_by_bounds"] is True
+    assert found.combinations["sum"]["held_by_bounds"] is False
     assert found.combinations["a_only"]["value"] == pytest.approx(math.exp(-10.0))
     assert found.combinations["sum"]["relative_half_width"] > 0.0
     assert "exp(a) to" not in found.statement and "exp(a + b) to ±" in found.statement

@@ -28,7 +28,7 @@ from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import distributions, quiet_optuna
 from ..storage._storage import open_storage
 from ..study._spec import StudySpec
-from ._determination import at_bound_text
+from ._determination import at_bound_text, interval_text
 from ._fidelity import LOW_FIDELITY_BUDGET, CorrectedCalibration, CorrectedRuns, CurveCorrection
 from ._local import LocalFit, bound_sides
 from ._loop import CalibrationLoop, SolverRuns, VerifiedPoint, determination_at
@@ -436,8 +436,7 @@ def calibration_note(result: Mapping[str, Any]) -> list[str]:
     if determination:
         lines += ["", "| quantity | value | 95 % interval |", "|---|---|---|"]
         for key, c in determination["combinations"].items():
-            span = "not determined" if c["low"] is None else f"{c['low']:.4g} – {c['high']:.4g}"
-            lines.append(f"| {key} | {c['value']:.4g} | {span} |")
+            lines.append(f"| {key} | {c['value']:.4g} | {interval_text(c)} |")
         for name, value in result["params"].items():
             interval = determination["intervals"].get(name)
             span = (

@@ -68,7 +68,8 @@ class Determination:
     ``free``: parameters whose linearised interval spans ≥ ``FREE_SHARE`` of the
     range (their interval is then the whole range); a
     combination along a direction the curves do not determine at all, or of
-    parameters all held at a bound (the ranges hold it), has ``None`` bounds;
+    parameters all held at a bound (``held_by_bounds``: the ranges hold it), has
+    ``None`` bounds;
     ``held_at_bound``: parameters the fit
     holds at a bound of their range; ``directions``: eigen-directions of the
     covariance in the declared scale, best determined first, each with its 95 %
@@ -268,7 +269,7 @@ def _combination(
     covariance: _Covariance,
     span: np.ndarray,
     t: float,
-) -> dict[str, float | None]:
+) -> dict[str, Any]:
     def log_value(zz: np.ndarray) -> float:
         theta = zz.copy()
         theta[log] = np.exp(zz[log])
@@ -280,19 +281,30 @@ def _combination(
     )
     gradient = every[free_index]
     value = math.exp(log_value(z))
+    none = {"value": value, "low": None, "high": None, "relative_half_width": None}
     if not np.any(np.abs(gradient) > HELD_LOAD * np.abs(every).max(initial=0.0)):
         # every parameter it depends on is held at a bound: the range holds it, not the curves
-        return {"value": value, "low": None, "high": None, "relative_half_width": None}
+        return {**none, "held_by_bounds": True}
     sd, move = covariance.spread(gradient, span[free_index])
     half = t * sd + move  # the valley's move within the ranges: a share of it, not a variance
     if not half < 700.0:  # inf, or exp would overflow: a direction the curves do not determine
-        return {"value": value, "low": None, "high": None, "relative_half_width": None}
+        return {**none, "held_by_bounds": False}
     return {
         "value": value,
         "low": value * math.exp(-half),
         "high": value * math.exp(half),
         "relative_half_width": math.expm1(half),
+        "held_by_bounds": False,
     }
+
+
+def interval_text(combination: Mapping[str, Any]) -> str:
+    """A combination's 95 % interval as the note and the report show it."""
+    if combination.get("held_by_bounds"):
+        return "held by the ranges (its parameters at bounds)"
+    if combination["low"] is None:
+        return "not determined"
+    return f"{combination['low']:.4g} – {combination['high']:.4g}"
 
 
 def _statement(

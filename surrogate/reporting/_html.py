@@ -16,6 +16,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from ..calibration._compare import comparison_figures
+from ..calibration._determination import interval_text
 from ..calibration._diagnose import ladder_figure
 from ..calibration._statistics import ranking_label
 from ..storage._dashboard import verified_curves_figure
@@ -312,8 +313,7 @@ def _determination(record: Mapping[str, Any]) -> str:
             span += " (free within its range)" if name in determination["free"] else ""
         rows.append([_e(name), _num(value), _e(span)])
     for key, c in ((determination or {}).get("combinations") or {}).items():
-        span = "not determined" if c["low"] is None else f"{c['low']:.4g} – {c['high']:.4g}"
-        rows.append([_e(key), _num(c["value"]), _e(span)])
+        rows.append([_e(key), _num(c["value"]), _e(interval_text(c))])
     parts = ["<h3>Parameters and what the curves determine</h3>"]
     parts.append(_table(["quantity", "value", "95 % interval"], rows))
     if determination is None:
