@@ -28,7 +28,7 @@ from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import distributions, quiet_optuna
 from ..storage._storage import open_storage
 from ..study._spec import StudySpec
-from ._determination import at_bound_text, interval_text
+from ._determination import at_bound_text, interval_text, parameter_interval_text
 from ._fidelity import LOW_FIDELITY_BUDGET, CorrectedCalibration, CorrectedRuns, CurveCorrection
 from ._local import LocalFit, bound_sides
 from ._loop import CalibrationLoop, SolverRuns, VerifiedPoint, determination_at
@@ -438,12 +438,8 @@ def calibration_note(result: Mapping[str, Any]) -> list[str]:
         for key, c in determination["combinations"].items():
             lines.append(f"| {key} | {c['value']:.4g} | {interval_text(c)} |")
         for name, value in result["params"].items():
-            interval = determination["intervals"].get(name)
-            span = (
-                "held at a bound" if interval is None else f"{interval[0]:.4g} – {interval[1]:.4g}"
-            )
-            free = " (free within its range)" if name in determination["free"] else ""
-            lines.append(f"| {name} | {value:.4g} | {span}{free} |")
+            span = parameter_interval_text(name, determination)
+            lines.append(f"| {name} | {value:.4g} | {span} |")
     return lines
 
 

@@ -298,6 +298,15 @@ def _combination(
     }
 
 
+def parameter_interval_text(name: str, determination: Mapping[str, Any]) -> str:
+    """A parameter's 95 % interval as the note and the report show it."""
+    interval = determination["intervals"].get(name)
+    if interval is None:
+        return "held at a bound of its range"
+    free = " (free within its range)" if name in determination["free"] else ""
+    return f"{interval[0]:.4g} – {interval[1]:.4g}{free}"
+
+
 def interval_text(combination: Mapping[str, Any]) -> str:
     """A combination's 95 % interval as the note and the report show it."""
     if combination.get("held_by_bounds"):

@@ -498,6 +498,7 @@ def _result(
         active = active.copy()
         active[[model.coordinates.ie, model.coordinates.is_]] = 0
     converged = test is not None and test.holds
+    sides = bound_sides(unit)
     if test is not None and test.holds:
         message = test.message
     else:
@@ -509,7 +510,7 @@ def _result(
         curves=curves,  # type: ignore[arg-type]
         jacobian=jac,
         # within a hair of a bound, or what least_squares itself reports as an active bound
-        at_bound=np.where(bound_sides(unit) != 0, bound_sides(unit), active),
+        at_bound=np.where(sides != 0, sides, active),
         predicted_gain=None if test is None else test.predicted_gain,
         converged=converged,
         message=message,

@@ -16,7 +16,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from ..calibration._compare import comparison_figures
-from ..calibration._determination import interval_text
+from ..calibration._determination import interval_text, parameter_interval_text
 from ..calibration._diagnose import ladder_figure
 from ..calibration._statistics import ranking_label
 from ..storage._dashboard import verified_curves_figure
@@ -303,14 +303,7 @@ def _determination(record: Mapping[str, Any]) -> str:
     determination = record.get("determination")
     rows = []
     for name, value in record["params"].items():
-        interval = (determination or {}).get("intervals", {}).get(name)
-        if determination is None:
-            span = "—"
-        elif interval is None:
-            span = "held at a bound of its range"
-        else:
-            span = f"{interval[0]:.4g} – {interval[1]:.4g}"
-            span += " (free within its range)" if name in determination["free"] else ""
+        span = "—" if determination is None else parameter_interval_text(name, determination)
         rows.append([_e(name), _num(value), _e(span)])
     for key, c in ((determination or {}).get("combinations") or {}).items():
         rows.append([_e(key), _num(c["value"]), _e(interval_text(c))])
