@@ -23,14 +23,14 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable
-from typing import Any, Literal, overload
+from typing import Literal, overload
 
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
-from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import ConstantKernel, Kernel, Matern, WhiteKernel
 
 from ._basis import PrincipalBasis
+from ._regressor import Regressor
 from ._scale import FORCE_SCALE_N, force_of_latent, latent_of_force, latent_slope
 
 __all__ = ["FORCE_SCALE_N", "CurveSurrogate"]
@@ -96,10 +96,10 @@ class CurveSurrogate:
         ridge[0, 0] = 0.0
         return np.linalg.solve(design.T @ design + ridge, design.T @ scores)
 
-    def _score_gp(self, j: int, Z: np.ndarray, score: np.ndarray) -> GaussianProcessRegressor:
+    def _score_gp(self, j: int, Z: np.ndarray, score: np.ndarray) -> Regressor:
         """The GP of score ``j``, warm-started from the previous fit's kernel if any."""
         warm = j < len(self._kernels)
-        gp = GaussianProcessRegressor(
+        gp = Regressor(
             kernel=self._kernels[j] if warm else _kernel(Z.shape[1]),
             normalize_y=True,
             n_restarts_optimizer=0 if warm else 1,
@@ -135,7 +135,7 @@ class CurveSurrogate:
             scores = trend + np.column_stack([p[0] for p in pairs])
             score_var = np.column_stack([p[1] ** 2 for p in pairs])
         else:  # the posterior mean without scikit-learn's per-call checks (the search's hot path)
-            scores = trend + np.column_stack([_posterior_mean(gp, Z) for gp in self.gps_])
+            scores = trend + np.column_stack([gp.posterior_mean(Z) for gp in self.gps_])
         Y = self.pca_.reconstruct(scores)
         curves = np.zeros((m * G, Y.shape[1] + 1))
         curves[:, 1:] = force_of_latent(Y)
@@ -156,8 +156,3 @@ def _kernel(n_features: int) -> Kernel:
     return ConstantKernel(1.0, (1e-3, 1e3)) * Matern(
         length_scale=length, length_scale_bounds=(1e-2, 1e3), nu=2.5
     ) + WhiteKernel(1e-6, (1e-10, 1e-2))
-
-
-def _posterior_mean(gp: Any, Z: np.ndarray) -> np.ndarray:
-    """``gp.predict(Z)`` of a fitted ``normalize_y`` regressor, by its own learned state."""
-    return gp._y_train_mean + gp._y_train_std * (gp.kernel_(Z, gp.X_train_) @ gp.alpha_)

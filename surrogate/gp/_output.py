@@ -22,8 +22,9 @@ from typing import Any
 import numpy as np
 from scipy.linalg import cho_solve
 from sklearn.exceptions import ConvergenceWarning
-from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import ConstantKernel, Kernel, Matern, WhiteKernel
+
+from ._regressor import Regressor
 
 __all__ = ["OutputGP"]
 
@@ -63,7 +64,7 @@ class OutputGP:
     def _fit_gp(
         self, features: np.ndarray, y: np.ndarray, kernel: Kernel, *, optimise: bool
     ) -> None:
-        gp = GaussianProcessRegressor(
+        gp = Regressor(
             kernel=kernel,
             normalize_y=False,
             optimizer="fmin_l_bfgs_b" if optimise else None,

@@ -1,0 +1,154 @@
+"""scikit-learn's Gaussian process regressor with a fast log-marginal likelihood.
+
+Both of the product's GPs (:mod:`._output`, :mod:`._curves`) use the kernel
+``C · Matern(ν, ARD) + White`` and fit its hyperparameters by L-BFGS-B on
+scikit-learn's log-marginal likelihood: about 30 evaluations a fit, hundreds of fits
+a calibration. Each evaluation sets ``kernel.theta`` and calls the composed kernel,
+and that bookkeeping (``get_params``, ``dir``, cloning of hyperparameter objects) cost
+about ten times the arithmetic on the product's tens of runs.
+
+:class:`Regressor` evaluates the likelihood of that one kernel from ``theta``
+directly, with the same NumPy and SciPy operations in the same order as
+scikit-learn 1.9 (``GaussianProcessRegressor.log_marginal_likelihood`` and the
+kernels' ``__call__``), so the value and its gradient are the same numbers, bit for
+bit (``tests/gp/test_regressor.py`` checks this against scikit-learn's own on random
+kernels and data). It does not set the kernel's ``theta`` on the way, as scikit-learn
+does with ``clone_kernel=False``: ``fit`` sets it to the optimum at its end. Any other
+kernel goes to scikit-learn's implementation unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.linalg.lapack import dpotrf, dpotrs
+from scipy.spatial.distance import cdist, pdist, squareform
+from sklearn.gaussian_process import GaussianProcessRegressor
+from sklearn.gaussian_process.kernels import (
+    ConstantKernel,
+    Kernel,
+    Matern,
+    Product,
+    Sum,
+    WhiteKernel,
+)
+
+__all__ = ["Regressor"]
+
+FAST_NU = (1.5, 2.5)
+
+
+def _fast_form(kernel: Kernel) -> bool:
+    """Whether ``kernel`` is ``C · Matern(ν ∈ FAST_NU) + White`` with every hyperparameter free."""
+    return (
+        isinstance(kernel, Sum)
+        and isinstance(kernel.k1, Product)
+        and isinstance(kernel.k1.k1, ConstantKernel)
+        and isinstance(kernel.k1.k2, Matern)
+        and isinstance(kernel.k2, WhiteKernel)
+        and kernel.k1.k2.nu in FAST_NU
+        and not any(h.fixed for h in kernel.hyperparameters)
+    )
+
+
+class Regressor(GaussianProcessRegressor):
+    """``GaussianProcessRegressor`` whose hyperparameter fit skips the kernel objects.
+
+    Same parameters, attributes and results as scikit-learn's (the log-marginal
+    likelihood is the same to the last bit); only its evaluation during ``fit`` is faster.
+    """
+
+    def fit(self, X, y):
+        self.fast_likelihood_ = self.kernel is not None and _fast_form(self.kernel)
+        return super().fit(X, y)
+
+    def posterior_mean(self, X: np.ndarray) -> np.ndarray:
+        """``predict(X)`` of the fitted regressor without scikit-learn's per-call checks
+        and kernel objects: the same numbers (the search's hot path, thousands of calls a
+        calibration)."""
+        if self.fast_likelihood_:
+            kernel = self.kernel_
+            matern = kernel.k1.k2
+            length_scale = np.squeeze(matern.length_scale).astype(float)
+            dists = cdist(X / length_scale, self.X_train_ / length_scale, metric="euclidean")
+            K_trans = _matern(dists, matern.nu) * kernel.k1.k1.constant_value  # White: 0 here
+        else:
+            K_trans = self.kernel_(X, self.X_train_)
+        return self._y_train_std * (K_trans @ self.alpha_) + self._y_train_mean
+
+    def log_marginal_likelihood(self, theta=None, eval_gradient=False, clone_kernel=True):
+        if theta is None or not getattr(self, "fast_likelihood_", False):
+            return super().log_marginal_likelihood(theta, eval_gradient, clone_kernel)
+        theta = np.asarray(theta)
+        K, K_gradient = _kernel_matrix(self.kernel_.k1.k2.nu, self.X_train_, theta, eval_gradient)
+        K[np.diag_indices_from(K)] += self.alpha
+        L, info = dpotrf(K, lower=1, clean=1)  # scipy.linalg.cholesky's LAPACK call
+        if info > 0:
+            return (-np.inf, np.zeros_like(theta)) if eval_gradient else -np.inf
+        y_train = self.y_train_
+        if y_train.ndim == 1:
+            y_train = y_train[:, np.newaxis]
+        alpha, _ = dpotrs(L, y_train, lower=1)  # scipy.linalg.cho_solve's
+        log_likelihood_dims = -0.5 * np.einsum("ik,ik->k", y_train, alpha)
+        log_likelihood_dims -= np.log(np.diag(L)).sum()
+        log_likelihood_dims -= K.shape[0] / 2 * np.log(2 * np.pi)
+        log_likelihood = log_likelihood_dims.sum(axis=-1)
+        if not eval_gradient:
+            return log_likelihood
+        inner_term = np.einsum("ik,jk->ijk", alpha, alpha)
+        K_inv, _ = dpotrs(L, np.eye(K.shape[0]), lower=1)
+        inner_term -= K_inv[..., np.newaxis]
+        gradient_dims = 0.5 * np.einsum("ijl,jik->kl", inner_term, K_gradient)
+        return log_likelihood, gradient_dims.sum(axis=-1)
+
+
+def _kernel_matrix(
+    nu: float, X: np.ndarray, theta: np.ndarray, eval_gradient: bool
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """``C · Matern(nu) + White`` at ``X`` for log-hyperparameters ``theta``.
+
+    ``theta`` = log [C, length scale(s), noise level], the kernel's own order. The
+    numbers are scikit-learn's: the products ``C · M`` and sums ``+ W`` it forms
+    elementwise are formed here on the nonzero entries only (the same roundings).
+    """
+    n_length = len(theta) - 2
+    constant = np.exp(theta[0])
+    length = np.exp(theta[1 : 1 + n_length]) if n_length > 1 else np.exp(theta[1])
+    noise = np.exp(theta[-1])
+    length_scale = np.squeeze(length).astype(float)  # Matern's _check_length_scale
+    X = np.atleast_2d(X)
+    n = X.shape[0]
+    dists = pdist(X / length_scale, metric="euclidean")
+    M = squareform(_matern(dists, nu))
+    np.fill_diagonal(M, 1)
+    CM = M * constant
+    K = CM.copy()
+    K[np.diag_indices(n)] += noise
+    if not eval_gradient:
+        return K, None
+    if n_length > 1:  # anisotropic
+        D = (X[:, np.newaxis, :] - X[np.newaxis, :, :]) ** 2 / (length_scale**2)
+    else:
+        D = squareform(dists**2)[:, :, np.newaxis]
+    if nu == 1.5:
+        M_gradient = 3 * D * np.exp(-np.sqrt(3 * D.sum(-1)))[..., np.newaxis]
+    else:
+        tmp = np.sqrt(5 * D.sum(-1))[..., np.newaxis]
+        M_gradient = 5.0 / 3.0 * D * (tmp + 1) * np.exp(-tmp)
+    if n_length == 1:
+        M_gradient = M_gradient[:, :].sum(-1)[:, :, np.newaxis]
+    K_gradient = np.zeros((n, n, len(theta)))
+    K_gradient[:, :, 0] = CM
+    K_gradient[:, :, 1:-1] = M_gradient * constant
+    K_gradient[np.arange(n), np.arange(n), -1] = noise
+    return K, K_gradient
+
+
+def _matern(dists: np.ndarray, nu: float) -> np.ndarray:
+    """Matérn ν ∈ FAST_NU of scaled distances, as scikit-learn's ``Matern.__call__``."""
+    if nu == 1.5:
+        K = dists * math.sqrt(3)
+        return (1.0 + K) * np.exp(-K)
+    K = dists * math.sqrt(5)
+    return (1.0 + K + K**2 / 3.0) * np.exp(-K)
