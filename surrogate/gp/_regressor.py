@@ -13,9 +13,9 @@ directly, with the same NumPy and SciPy operations in the same order as
 scikit-learn 1.9 (``GaussianProcessRegressor.log_marginal_likelihood`` and the
 kernels' ``__call__``), so the value and its gradient are the same numbers, bit for
 bit (``tests/gp/test_regressor.py`` checks this against scikit-learn's own on random
-kernels and data). It does not set the kernel's ``theta`` on the way, as scikit-learn
-does with ``clone_kernel=False``: ``fit`` sets it to the optimum at its end. Any other
-kernel goes to scikit-learn's implementation unchanged.
+kernels and data). Where scikit-learn's would set the kernel's ``theta`` as a side
+effect, only inside ``fit``'s search is that skipped (its end sets it); any other
+kernel, or call, goes to scikit-learn's implementation unchanged.
 """
 
 from __future__ import annotations
@@ -34,20 +34,22 @@ from sklearn.gaussian_process.kernels import (
     Sum,
     WhiteKernel,
 )
+from sklearn.utils.validation import check_is_fitted
 
 __all__ = ["Regressor"]
 
 FAST_NU = (1.5, 2.5)
 
 
-def _fast_form(kernel: Kernel) -> bool:
-    """Whether ``kernel`` is ``C · Matern(ν ∈ FAST_NU) + White`` with every hyperparameter free."""
+def _fast_form(kernel: Kernel | None) -> bool:
+    """Whether ``kernel`` is ``C · Matern(ν ∈ FAST_NU) + White`` with every hyperparameter free
+    (these classes themselves: a subclass may compute otherwise)."""
     return (
-        isinstance(kernel, Sum)
-        and isinstance(kernel.k1, Product)
-        and isinstance(kernel.k1.k1, ConstantKernel)
-        and isinstance(kernel.k1.k2, Matern)
-        and isinstance(kernel.k2, WhiteKernel)
+        type(kernel) is Sum
+        and type(kernel.k1) is Product
+        and type(kernel.k1.k1) is ConstantKernel
+        and type(kernel.k1.k2) is Matern
+        and type(kernel.k2) is WhiteKernel
         and kernel.k1.k2.nu in FAST_NU
         and not any(h.fixed for h in kernel.hyperparameters)
     )
@@ -58,17 +60,34 @@ class Regressor(GaussianProcessRegressor):
 
     Same parameters, attributes and results as scikit-learn's (the log-marginal
     likelihood is the same to the last bit); only its evaluation during ``fit`` is faster.
+    The fast likelihood is taken where scikit-learn's leaves the kernel as it is
+    (``clone_kernel=True``) and inside ``fit``'s hyperparameter search, whose end sets the
+    kernel's ``theta`` anyway. A fit without optimizer keeps scikit-learn's path: there,
+    setting ``theta`` rounds each hyperparameter through ``exp(log(·))``, and the fit's
+    matrices follow from the rounded values.
     """
 
+    _searching = False  # inside fit's hyperparameter search
+
     def fit(self, X, y):
-        self.fast_likelihood_ = self.kernel is not None and _fast_form(self.kernel)
-        return super().fit(X, y)
+        fast = _fast_form(self.kernel)
+        self._n_theta = self.kernel.n_dims if fast else -1
+        self._searching = fast and self.optimizer is not None
+        try:
+            super().fit(X, y)
+        finally:
+            self._searching = False
+        self.fast_likelihood_ = fast
+        return self
 
     def posterior_mean(self, X: np.ndarray) -> np.ndarray:
-        """``predict(X)`` of the fitted regressor without scikit-learn's per-call checks
-        and kernel objects: the same numbers (the search's hot path, thousands of calls a
-        calibration)."""
-        if self.fast_likelihood_:
+        """``predict(X)`` of the fitted regressor on one-dimensional targets, without
+        scikit-learn's per-call checks and kernel objects: the same numbers (the search's
+        hot path, thousands of calls a calibration)."""
+        fast = getattr(self, "fast_likelihood_", None)
+        if fast is None:
+            check_is_fitted(self, "alpha_")  # not the prior's mean, as predict would give
+        if fast:
             kernel = self.kernel_
             matern = kernel.k1.k2
             length_scale = np.squeeze(matern.length_scale).astype(float)
@@ -79,7 +98,8 @@ class Regressor(GaussianProcessRegressor):
         return self._y_train_std * (K_trans @ self.alpha_) + self._y_train_mean
 
     def log_marginal_likelihood(self, theta=None, eval_gradient=False, clone_kernel=True):
-        if theta is None or not getattr(self, "fast_likelihood_", False):
+        fast = self._searching or (clone_kernel and getattr(self, "fast_likelihood_", False))
+        if theta is None or not fast or np.shape(theta) != (self._n_theta,):
             return super().log_marginal_likelihood(theta, eval_gradient, clone_kernel)
         theta = np.asarray(theta)
         K, K_gradient = _kernel_matrix(self.kernel_.k1.k2.nu, self.X_train_, theta, eval_gradient)
@@ -110,8 +130,8 @@ def _kernel_matrix(
     """``C · Matern(nu) + White`` at ``X`` for log-hyperparameters ``theta``.
 
     ``theta`` = log [C, length scale(s), noise level], the kernel's own order. The
-    numbers are scikit-learn's: the products ``C · M`` and sums ``+ W`` it forms
-    elementwise are formed here on the nonzero entries only (the same roundings).
+    numbers are scikit-learn's: ``C · M`` is the same product taken either way round,
+    and its ``+ W`` adds zero off the diagonal, so only the diagonal gets the noise here.
     """
     n_length = len(theta) - 2
     constant = np.exp(theta[0])

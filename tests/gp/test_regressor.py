@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from sklearn.base import clone
+from sklearn.exceptions import NotFittedError
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
 
@@ -34,7 +36,7 @@ def test_the_likelihood_and_its_gradient_are_scikit_learns_bit_for_bit(nu, d, n,
     ours = Regressor(kernel=kernel, optimizer=None, normalize_y=True).fit(X, y)
     theirs = GaussianProcessRegressor(kernel=kernel, optimizer=None, normalize_y=True).fit(X, y)
     bounds = kernel.bounds
-    thetas = rng.uniform(bounds[:, 0], bounds[:, 1], (20, len(bounds)))  # extremes included
+    thetas = rng.uniform(bounds[:, 0], bounds[:, 1], (20, len(bounds)))  # across the bounds
     with monkeypatch.context() as patch:  # ours must not go through the kernel objects
         patch.setattr(Matern, "__call__", _refuse)
         fast = [ours.log_marginal_likelihood(t, eval_gradient=True) for t in thetas]
@@ -53,13 +55,16 @@ def _refuse(*args, **kwargs):
 
 @pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
 @pytest.mark.parametrize("nu", [1.5, 2.5])
-def test_a_fit_with_restarts_is_scikit_learns(nu):
+def test_a_fit_with_restarts_is_scikit_learns(nu, monkeypatch):
     rng = np.random.default_rng(7)
     X, y = _data(rng, 25, 3, duplicate=False)
     kernel = _kernel(3, nu, rng)
+    calls = _count_matern_calls(monkeypatch)
     ours = Regressor(kernel=kernel, n_restarts_optimizer=3, random_state=0).fit(X, y)
+    ours_calls = calls.pop()
     theirs = GaussianProcessRegressor(kernel=kernel, n_restarts_optimizer=3, random_state=0)
     theirs.fit(X, y)
+    assert ours.fast_likelihood_ and ours_calls == 1 < calls.pop()  # ours: fit's final K only
     np.testing.assert_array_equal(ours.kernel_.theta, theirs.kernel_.theta)
     np.testing.assert_array_equal(ours.alpha_, theirs.alpha_)
     assert ours.log_marginal_likelihood_value_ == theirs.log_marginal_likelihood_value_
@@ -89,3 +94,88 @@ def test_the_posterior_mean_is_predicts_bit_for_bit(nu, d, monkeypatch):
         patch.setattr(Matern, "__call__", _refuse)
         mean = gp.posterior_mean(Z)
     np.testing.assert_array_equal(mean, expected)
+
+
+def _count_matern_calls(monkeypatch):
+    """Count ``Matern.__call__`` calls; ``calls.pop()`` returns the count so far and resets it."""
+    counts = [0]
+    original = Matern.__call__
+
+    def counted(self, *args, **kwargs):
+        counts[0] += 1
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(Matern, "__call__", counted)
+
+    class Calls:
+        def pop(self):
+            value, counts[0] = counts[0], 0
+            return value
+
+    return Calls()
+
+
+def test_a_fit_without_optimizer_is_scikit_learns_hyperparameters_rounding_included():
+    """scikit-learn's fit without optimizer sets ``theta`` once, which rounds each
+    hyperparameter through exp(log(·)); its matrices follow from the rounded values
+    (a third of hand-made kernels moved). ``OutputGP.from_dict`` fits this way."""
+    rng = np.random.default_rng(11)
+    for case in range(60):
+        d = 1 + case % 4
+        X, y = _data(rng, 15, d, duplicate=False)
+        kernel = _kernel(d, (1.5, 2.5)[case % 2], rng)
+        if case % 3 == 0:  # as from_dict rebuilds it
+            kernel = kernel.clone_with_theta(rng.uniform(kernel.bounds[:, 0], kernel.bounds[:, 1]))
+        ours = Regressor(kernel=kernel, optimizer=None, normalize_y=True).fit(X, y)
+        theirs = GaussianProcessRegressor(kernel=kernel, optimizer=None, normalize_y=True)
+        theirs.fit(X, y)
+        for name, value in theirs.kernel_.get_params().items():
+            if not hasattr(value, "get_params"):
+                np.testing.assert_array_equal(ours.kernel_.get_params()[name], value)
+        np.testing.assert_array_equal(ours.L_, theirs.L_)
+        np.testing.assert_array_equal(ours.alpha_, theirs.alpha_)
+        assert ours.log_marginal_likelihood_value_ == theirs.log_marginal_likelihood_value_
+        Z = rng.uniform(0.0, 1.0, (4, d))
+        np.testing.assert_array_equal(ours.posterior_mean(Z), theirs.predict(Z))
+
+
+@pytest.mark.parametrize(
+    "case", ["two outputs", "isotropic, 3 features", "not positive definite", "array alpha"]
+)
+def test_other_shapes_are_scikit_learns_too(case):
+    rng = np.random.default_rng(5)
+    X, y = _data(rng, 12, 3, duplicate=False)
+    kernel, alpha = _kernel(3, 2.5, rng), 1e-10
+    if case == "two outputs":
+        y = np.column_stack([y, np.cos(X).sum(axis=1)])
+    if case == "isotropic, 3 features":
+        kernel = ConstantKernel(2.0) * Matern(0.7, (1e-2, 1e3), nu=1.5) + WhiteKernel(1e-4)
+    if case == "array alpha":
+        alpha = rng.uniform(1e-8, 1e-4, len(X))
+    theirs = GaussianProcessRegressor(kernel=kernel, optimizer=None, alpha=alpha, normalize_y=True)
+    theirs.fit(X, y)
+    ours = Regressor(kernel=kernel, optimizer=None, alpha=alpha, normalize_y=True).fit(X, y)
+    if case == "not positive definite":  # past fit, which refuses such a K: 1 off K's diagonal
+        ours.alpha = theirs.alpha = np.full(len(X), -1.0)
+    thetas = rng.uniform(kernel.bounds[:, 0], kernel.bounds[:, 1], (5, len(kernel.theta)))
+    if case == "not positive definite":
+        thetas[:, 0] = np.log(1e-3)  # C below the 1 taken off the diagonal
+    for theta in thetas:
+        value, gradient = ours.log_marginal_likelihood(theta, eval_gradient=True)
+        expected, expected_gradient = theirs.log_marginal_likelihood(theta, eval_gradient=True)
+        np.testing.assert_array_equal(value, expected)
+        np.testing.assert_array_equal(gradient, expected_gradient)
+        if case == "not positive definite":
+            assert value == -np.inf
+
+
+def test_what_the_fast_path_does_not_take():
+    rng = np.random.default_rng(9)
+    X, y = _data(rng, 10, 2, duplicate=False)
+    fixed = ConstantKernel(1.0, "fixed") * Matern([0.5, 0.5], nu=2.5) + WhiteKernel(1e-4)
+    assert not Regressor(kernel=fixed, random_state=0).fit(X, y).fast_likelihood_
+    gp = Regressor(kernel=_kernel(2, 2.5, rng), random_state=0).fit(X, y)
+    with pytest.raises(ValueError, match="theta"):
+        gp.log_marginal_likelihood(np.zeros(6))  # scikit-learn's error for a wrong length
+    with pytest.raises(NotFittedError):
+        clone(gp).posterior_mean(X)
