@@ -6,7 +6,7 @@ scikit-learn's log-marginal likelihood: about 30 evaluations a fit, hundreds of 
 a calibration. Each evaluation sets ``kernel.theta`` and calls the composed kernel,
 and that bookkeeping (``get_params``, ``dir``, cloning of hyperparameter objects)
 outweighed the arithmetic on the product's tens of runs (``benchmarks/gp_fit.py``:
-fits 1.5–2.2 × and posterior means of a search batch 4.7–6.7 × faster, 10–80 runs).
+fits 1.3–2.4 × and posterior means of a search batch 4.4–7 × faster, 10–80 runs).
 
 :class:`Regressor` evaluates the likelihood of that one kernel from ``theta``
 directly, with the same NumPy and SciPy operations in the same order as
