@@ -169,6 +169,7 @@ def test_other_shapes_are_scikit_learns_too(case):
             assert value == -np.inf
 
 
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
 def test_what_the_fast_path_does_not_take():
     rng = np.random.default_rng(9)
     X, y = _data(rng, 10, 2, duplicate=False)
