@@ -300,3 +300,38 @@ def test_the_shipped_measurements_are_what_the_seeded_script_makes(tmp_path):
     # the product never reads the truth: no module of the package names the file
     for source in (REPO / "surrogate").rglob("*.py"):
         assert "webbing_tests_truth" not in source.read_text()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_surrogate_search_finds_the_surrogates_best_and_chunks_change_nothing(
+    tmp_path, monkeypatch, seed
+):
+    """The global phase's search of the surrogate (a Sobol batch, then L-BFGS-B from its
+    best points): its candidate predicts no worse than any of 4096 random points, and
+    predicting the batch in chunks picks the same candidate."""
+    import surrogate.calibration._loop as loop_module
+    from surrogate.calibration._loop import CalibrationLoop, SolverRuns
+    from surrogate.calibration._problem import CalibrationProblem
+    from surrogate.gp import CurveSurrogate
+    from surrogate.study._measurements import load_measurements
+    from surrogate.study._spec import load_study
+
+    spec = load_study(_study(tmp_path, BASE_TESTS))
+    problem = CalibrationProblem(spec, load_measurements(spec.measurements_file), [])
+    runs = SolverRuns(problem, tmp_path / "cache", jobs=1)
+    rng = np.random.default_rng(seed)
+    X = problem.space.from_unit(rng.random((12, len(problem.space))))
+    runs.run(X, [i % len(problem.groups) for i in range(12)])
+    model = CurveSurrogate(problem.features, len(problem.groups)).fit(
+        np.array(runs.X), np.array(runs.groups), np.array(runs.curves)
+    )
+    loop = CalibrationLoop(problem, runs, noise=0.05, budget=100, progress=False, label="t")
+    theta, predicted = loop._search(model, 300)
+    assert problem.space.clip(theta[None, :])[0] == pytest.approx(theta, rel=0, abs=0)
+    assert predicted == pytest.approx(problem.batch_rmse(model.predict(theta[None, :]))[0])
+    others = problem.batch_rmse(model.predict(problem.space.from_unit(rng.random((4096, 3)))))
+    assert predicted <= others.min()
+    monkeypatch.setattr(loop_module, "_CHUNK", 100)  # 512 points in six chunks
+    again, predicted_again = loop._search(model, 300)
+    np.testing.assert_array_equal(again, theta)
+    assert predicted_again == predicted
