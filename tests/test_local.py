@@ -101,3 +101,41 @@ def test_a_fit_names_the_runs_it_was_evaluated_with(tmp_path, seed):
     calls = runs.calls
     model.evaluate(rebuilt)
     assert runs.calls == calls
+
+
+@pytest.mark.parametrize(
+    ("script", "converged", "tests"),
+    [
+        ("gggggh", True, 6),  # five verified gains in a row: more than ROUNDS, none a stall
+        ("sgsgsgh", True, 7),  # three stalls, below ROUNDS
+        ("ssss", False, 4),  # ROUNDS stalls: given up
+        ("gsgsgsgsh", False, 8),  # the fourth stall ends it, whatever the gains between
+    ],
+)
+def test_only_rounds_without_a_verified_gain_count_against_the_limit(
+    tmp_path, monkeypatch, script, converged, tests
+):
+    """A round whose step the solver verified is progress (a fit crawling along a valley
+    goes on while the budget lasts); ``ROUNDS`` rounds whose test found no better point
+    end the fit unconverged (the first-order test scripted: g a verified gain, s a
+    stall, h holds)."""
+    problem = _problem(tmp_path, 0)
+    start = np.array([TRUTH["ecoat_gpa"], TRUTH["scoat_gpa"], TRUTH["tcoat_mm"]])
+    calls = []
+
+    def scripted(model, x):
+        kind = script[len(calls)]
+        calls.append(kind)
+        return _local._FirstOrderTest(
+            kind == "h", 0.01, 0.005 if kind == "g" else None, x, f"scripted {kind}"
+        )
+
+    monkeypatch.setattr(_local, "_first_order_test", scripted)
+    runs = SolverRuns(problem, tmp_path / "c", jobs=1)
+    fit = local_fit(ResidualModel(problem, runs), start, near=True)
+    assert _local._ROUNDS == 4
+    assert len(calls) == tests
+    assert fit.converged is converged
+    assert fit.message == (
+        "scripted h" if converged else "not at a verified local optimum: scripted s"
+    )
