@@ -329,7 +329,8 @@ def test_the_surrogate_search_finds_the_surrogates_best_and_chunks_change_nothin
     theta, predicted = loop._search(model, 300)
     assert problem.space.clip(theta[None, :])[0] == pytest.approx(theta, rel=0, abs=0)
     assert predicted == pytest.approx(problem.batch_rmse(model.predict(theta[None, :]))[0])
-    others = problem.batch_rmse(model.predict(problem.space.from_unit(rng.random((4096, 3)))))
+    randoms = problem.space.from_unit(rng.random((4096, len(problem.space))))
+    others = problem.batch_rmse(model.predict(randoms))
     assert predicted <= others.min()
     monkeypatch.setattr(loop_module, "_CHUNK", 100)  # 512 points in six chunks
     again, predicted_again = loop._search(model, 300)

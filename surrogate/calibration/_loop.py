@@ -490,7 +490,7 @@ class CalibrationLoop:
             return problem.batch_rmse(model.predict(X))
 
         sobol = qmc.Sobol(len(space), scramble=True, seed=self.seed * 1000 + self.iterations)
-        batch = sobol.random_base2(max(0, int(np.ceil(np.log2(max(n_points, 1))))))
+        batch = sobol.random_base2(max(n_points - 1, 0).bit_length())  # 2**m ≥ n_points
         values = np.concatenate(  # in chunks: a large surrogate_trials stays in memory
             [objective(chunk) for chunk in np.split(batch, range(_CHUNK, len(batch), _CHUNK))]
         )
