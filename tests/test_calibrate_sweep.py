@@ -83,6 +83,28 @@ def test_a_budget_too_small_says_budget_exhausted_and_claims_nothing(tmp_path):
     assert "within the noise" not in result.message
 
 
+def test_a_fit_that_stops_with_runs_left_does_not_say_raise_the_budget(tmp_path, monkeypatch):
+    """Four rounds whose first-order test found nothing better end the local phase with
+    runs left (the test scripted to find nothing, as on a rough response): the message
+    gives the fit's reason and says the budget was not the limit; the same data with a
+    budget that runs out first says to raise it."""
+    from surrogate.calibration import _local
+
+    def nothing_better(model, x):
+        return _local._FirstOrderTest(False, 0.01, None, x, "scripted: nothing better")
+
+    monkeypatch.setattr(_local, "_first_order_test", nothing_better)
+    path = write_calibration_study(tmp_path, SETS["mid-n1"])
+    stalled = surrogate.calibrate(path, max_solver_calls=200, progress=False)
+    assert stalled.status == "budget_exhausted" and stalled.solver_calls < 200
+    assert "not at a verified local optimum: scripted: nothing better" in stalled.message
+    assert "the budget was not the limit" in stalled.message
+    assert "raise --budget" not in stalled.message
+    spent = surrogate.calibrate(path, max_solver_calls=stalled.solver_calls - 4, progress=False)
+    assert spent.solver_calls > stalled.solver_calls - 4 - 2  # no other run fits: 2 groups
+    assert "raise --budget" in spent.message and "not the limit" not in spent.message
+
+
 def test_a_budget_spent_at_a_point_within_the_noise_says_the_model_fits_but_not_where(tmp_path):
     """Four more runs and the best verified point passes the F-test (RMSE 0.99 × the
     noise, p 0.56 here) before the first-order test holds: a local optimum fits at

@@ -256,7 +256,8 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
         storage=url,
         message="",
     )
-    message = _message(problem, result, fit)
+    spent = runs.calls + len(problem.groups) > loop.budget  # no other verification fits
+    message = _message(problem, result, fit, budget_spent=spent)
     retried, sentence = _retried(loop, best)
     message += sentence
     multi = _multi_fidelity(loop, best)
@@ -324,7 +325,17 @@ def unconverged_reason(result: CalibrationResult, fit: LocalFit | None) -> str |
     return "no local fit ended at the best verified point"
 
 
-def _message(problem: CalibrationProblem, result: CalibrationResult, fit: LocalFit | None) -> str:
+def _message(
+    problem: CalibrationProblem,
+    result: CalibrationResult,
+    fit: LocalFit | None,
+    *,
+    budget_spent: bool,
+) -> str:
+    """The calibration's one message. Unconverged: the local fit's reason, and "raise
+    --budget" only where the budget is what stopped it (``budget_spent``: no further
+    verification fits); a fit that stopped with runs left (four rounds whose test found
+    nothing better) says that more runs would not have been spent there."""
     rmse, noise = result.rmse_n, result.noise_n
     text = (
         f"{model_label(result.effects)}: RMSE {rmse:.4g} N over {problem.n_points} points of "
@@ -333,7 +344,12 @@ def _message(problem: CalibrationProblem, result: CalibrationResult, fit: LocalF
     )
     why = unconverged_reason(result, fit)
     if why is not None:
-        text = f"{text} ({why}; best verified point so far — raise --budget)"
+        hint = (
+            "raise --budget"
+            if budget_spent
+            else "the budget was not the limit: a larger one would not have been spent"
+        )
+        text = f"{text} ({why}; best verified point so far — {hint})"
         text += _at_bounds(problem, result.params)
         if result.misfit is None:
             return text
