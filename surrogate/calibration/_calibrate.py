@@ -202,17 +202,28 @@ def run_calibration(
     cache = spec.directory / ".solver-cache"
     budget = max_solver_calls or spec.budget.calibration_solver_calls
     name = calibration_study_name(spec, chosen)
-    options = {"noise": noise, "progress": progress, "label": name}
     loop: CalibrationLoop
     if not spec.low_fidelity:
         runs = SolverRuns(problem, cache, jobs=jobs)
-        loop = CalibrationLoop(problem, runs, budget=budget, **options)
+        loop = CalibrationLoop(
+            problem, runs, noise=noise, budget=budget, progress=progress, label=name
+        )
     elif expensive:
         runs = SolverRuns(problem, cache, jobs=jobs)
-        loop = CorrectedCalibration(problem, runs, budget=budget, correction=correction, **options)
+        loop = CorrectedCalibration(
+            problem,
+            runs,
+            noise=noise,
+            budget=budget,
+            progress=progress,
+            label=name,
+            correction=correction,
+        )
     else:
         runs = CorrectedRuns(problem, cache, jobs=jobs, correction=correction)
-        loop = CalibrationLoop(problem, runs, budget=LOW_FIDELITY_BUDGET, **options)
+        loop = CalibrationLoop(
+            problem, runs, noise=noise, budget=LOW_FIDELITY_BUDGET, progress=progress, label=name
+        )
     loop.run(spec.budget.surrogate_trials)
     result = _result(loop, chosen, storage or spec.default_storage())
     if record and expensive:

@@ -201,9 +201,8 @@ class CorrectedCalibration(CalibrationLoop):
             return
         theta, fit = start
         G = len(self.problem.groups)
-        fresh = fit is not None and not self.inherited
         ran = self._teach(theta)  # a point the expensive solver cannot run is left out
-        probes = self._probes(fit, ran) if fresh else []
+        probes = self._probes(fit, ran) if fit is not None and not self.inherited else []
         for tries in probes:  # the second probe only where the expensive solver failed
             for point in tries:
                 if self.runs.calls + G > self.budget or self.dropped is not None:
@@ -214,10 +213,10 @@ class CorrectedCalibration(CalibrationLoop):
             self._single_fidelity(surrogate_trials)
             return
         while self.verified and self.dropped is None and self.runs.calls + G <= self.budget:
-            theta = self._next()
-            if theta is None:
+            proposal = self._next()
+            if proposal is None:
                 break
-            self._manage_radius(self._teach(theta))  # a failed run: a smaller region
+            self._manage_radius(self._teach(proposal))  # a failed run: a smaller region
             if self.stalled is not None:
                 break
         if self.dropped is not None:
@@ -452,7 +451,7 @@ class CorrectedCalibration(CalibrationLoop):
         curves_array = np.array(curves)
         return curves_array, np.array(stds), self.problem.rmse(curves_array)
 
-    def _learn(self, point: VerifiedPoint) -> list[dict[str, Any]]:
+    def _learn(self, point: VerifiedPoint) -> list[dict[str, Any] | None]:
         """Teach the correction the expensive runs of a verified point; the built-in
         results of the same runs."""
         G = len(self.problem.groups)
@@ -473,7 +472,7 @@ class CorrectedCalibration(CalibrationLoop):
     def _distrusted(
         self,
         point: VerifiedPoint,
-        lows: list[dict[str, Any]],
+        lows: list[dict[str, Any] | None],
         predicted: tuple[np.ndarray, np.ndarray, float],
     ) -> bool:
         """The correction's rules at a verified point: its size, whether the expensive
@@ -481,8 +480,9 @@ class CorrectedCalibration(CalibrationLoop):
         of a correction learned on another model — whether it carries to this one
         (:func:`not_carried`: its optimum is then a start). Sets ``dropped``."""
         highs = [self.runs.cache.get(key) for key in point.keys]
-        if len(lows) == len(highs) and all(h is not None for h in highs):
-            size = Correction.between(lows, highs)
+        ran = [low for low in lows if low is not None]
+        if len(ran) == len(highs) and all(h is not None for h in highs):
+            size = Correction.between(ran, highs)
             self.corrections[point.keys[0]] = size
             reason = correction_refused(size)
             if reason is not None:

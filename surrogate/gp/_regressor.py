@@ -45,7 +45,8 @@ def _fast_form(kernel: Kernel | None) -> bool:
     """Whether ``kernel`` is ``C · Matern(ν ∈ FAST_NU) + White`` with every hyperparameter free
     (these classes themselves: a subclass may compute otherwise)."""
     return (
-        type(kernel) is Sum
+        kernel is not None
+        and type(kernel) is Sum
         and type(kernel.k1) is Product
         and type(kernel.k1.k1) is ConstantKernel
         and type(kernel.k1.k2) is Matern

@@ -376,7 +376,7 @@ class Verifier:
                 point = trial.system_attrs.get("fixed_params") or trial.params
                 self._queued.setdefault(attrs.get("phase", ""), []).append(dict(point))
         keys = {t.user_attrs.get("input_hash") for t in study.get_trials(deepcopy=False)}
-        for key, record in finished_records(study, keys - {None}).items():
+        for key, record in finished_records(study, {k for k in keys if k is not None}).items():
             known = self._replay if key in mine else self.records
             known[key] = self._rescored(record)
 

@@ -1260,6 +1260,7 @@ def _sag(problem: _Problem, rest: _Configuration) -> _Configuration:
             raise SolverError("the strip did not find its equilibrium under its own weight at 0°")
         current = problem.accept(ev, current)
     problem.line_load = load
+    assert ev is not None  # the loop ran (four fractions)
     if ev.gap < 0.0:  # cannot happen with the probe above the strip; kept as a guard
         problem.active = True
     return current

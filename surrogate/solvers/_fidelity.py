@@ -27,7 +27,7 @@ corrected built-in model and ask the expensive solver only to verify a point or 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -108,10 +108,10 @@ class Correction:
         return asdict(self)
 
     @classmethod
-    def between(cls, low: Mapping[str, Any] | list[Mapping[str, Any]], high: Any) -> Correction:
+    def between(cls, low: Mapping[str, Any] | Sequence[Mapping[str, Any]], high: Any) -> Correction:
         """From the plain-JSON results of the two solvers (lists: one per condition
         group; the group with the largest relative curve difference is reported)."""
-        lows = low if isinstance(low, list) else [low]
+        lows = [low] if isinstance(low, Mapping) else list(low)
         highs = high if isinstance(high, list) else [high]
         sizes = [_size(lo, hi) for lo, hi in zip(lows, highs, strict=True)]
         return max(sizes, key=lambda size: size.curve_rmse_relative)

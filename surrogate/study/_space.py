@@ -64,7 +64,7 @@ class ParameterSpec:
             return (np.log(values) - np.log(self.low)) / self.span
         return (values - self.low) / self.span
 
-    def from_unit(self, unit: np.ndarray) -> np.ndarray:
+    def from_unit(self, unit: np.ndarray | float) -> np.ndarray:
         """Inverse of :meth:`to_unit`."""
         unit = np.asarray(unit, dtype=float)
         if self.log:
