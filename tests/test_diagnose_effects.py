@@ -91,6 +91,32 @@ def test_each_hidden_built_in_effect_is_named_first(tmp_path, hidden):
         assert result.tied_with == []
 
 
+def test_the_same_law_is_tied_where_a_bound_stopped_its_local_refit(tmp_path):
+    """Strong hidden membrane bending on a soft thin coat (``benchmarks/diagnosis.py``'s
+    data set 20). The base model's calibrated coat is soft (Ecoat 0.53 GPa, near its
+    bound 0.5); the membrane-bending refit from there stopped at that bound at 17 × the
+    noise while hardening fitted to it, and hardening was named alone. A refit pressed
+    against a bound of a declared range the base model's was not is recalibrated over
+    the whole space: membrane bending fits as well, and the tie is reported."""
+    coating = {"ecoat_gpa": 0.8, "scoat_gpa": 0.1, "tcoat_mm": 0.015}
+    table = synthetic_measurements(
+        hidden_effect_tests(20),
+        coating=coating,
+        effects={"membrane_bending": {"d0_nmm": 3.0}},
+        noise_n=NOISE,
+        seed=20,
+    )
+    path = write_study(tmp_path, table, STUDY.replace("surrogate_trials = 100", ""), ranges=True)
+    result = surrogate.diagnose(
+        path, candidates=["hardening", "membrane_bending", "friction"], progress=False
+    )
+    assert result.systematic
+    assert {result.ranking[0]["effect"], *result.tied_with} == SAME_LAW, result.verdict
+    assert "these data cannot tell them apart" in result.verdict
+    for entry in result.ranking[:2]:
+        assert entry["rmse_n"] <= 1.3 * NOISE
+
+
 # -- an effect outside the library -------------------------------------------------------------
 TEMPERATURES = (15.0, 21.0, 21.0, 27.0, 33.0)  # ref replicates at 21 °C
 HUMIDITY = (45.0, 35.0, 55.0, 40.0, 50.0)  # a decoy

@@ -65,7 +65,7 @@ from ._calibrate import (
 )
 from ._compare import BANDS, angle_bands
 from ._fidelity import CorrectedCalibration, CorrectedRuns, CurveCorrection
-from ._local import ResidualModel, SolverFailed, local_fit
+from ._local import ResidualModel, SolverFailed, bound_sides, local_fit
 from ._loop import CalibrationLoop, SolverRuns
 from ._problem import (
     CalibrationProblem,
@@ -452,14 +452,16 @@ class _Refits:
         )
 
     def recalibrate(self, ranking: list[Candidate]) -> list[Candidate]:
-        """The leaders recalibrated over the whole space — and, before the verdict can be
-        "unexplained", every other candidate too; the ranking again.
+        """The leaders recalibrated over the whole space, with every candidate whose local
+        refit ended pressed against a bound of a declared range (:meth:`_pressed`) — and,
+        before the verdict can be "unexplained", every other candidate too; the ranking
+        again.
 
         A local refit stays in the basin of the current model's optimum (the coat's
         third parameter can sit in another; a compliant clamp needs a much stiffer
         coat than the model without it found).
         """
-        leaders = [c.effect for c in ranking if tied(c, ranking[0])]
+        leaders = [c.effect for c in ranking if tied(c, ranking[0]) or self._pressed(c.effect)]
         everyone = [c.effect for c in ranking]
         done: set[str] = set()
         for names_now in (leaders, everyone):
@@ -470,6 +472,22 @@ class _Refits:
             done.update(todo)
             ranking = sorted((self._entry(c.effect) for c in ranking), key=lambda c: c.delta_bic)
         return ranking
+
+    def _pressed(self, name: str) -> bool:
+        """Whether the candidate's local refit ended at a bound of a range the study
+        declares where the current model's refit did not: the refit could not follow its
+        valley there, so its figures say where the bound stopped it, not how well the
+        effect fits. Seen: hidden membrane bending (``benchmarks/diagnosis.py``, strong,
+        0.05 N) refitted from a soft coat stopped at Ecoat's lower bound at 17 × the
+        noise, while the truth (a stiffer, thinner coat) fits to the noise: its tie with
+        hardening went unseen."""
+        space = self.problem.spec.space
+
+        def sides(refit: _Refit) -> np.ndarray:
+            values = np.array([[refit.params[n] for n in space.names]])
+            return bound_sides(space.to_unit(values)[0])
+
+        return bool(np.any((sides(self.refits[name]) != 0) & (sides(self.current) == 0)))
 
     def _recalibrate_all(self, names: list[str]) -> None:
         self.say(f"recalibrating with {', '.join(names)} over the whole parameter space")

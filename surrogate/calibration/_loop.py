@@ -64,6 +64,9 @@ _CHUNK = 1024  # Sobol points predicted at once (the defaults' 128-512 in one)
 FD_STEP_SURROGATE = 1.5e-8  # √ε of a unit coordinate: L-BFGS-B's own finite-difference step
 SETTLED = 0.01  # relative RMSE improvement below which the global phase has settled
 STALE_LIMIT = 2  # the local phase finishes what the global one leaves
+# a verification whose RMSE the surrogate missed by more than this fraction of it taught the
+# surrogate a region it had not learned: not stale (``CalibrationLoop._stale``)
+MISSED = 0.5
 BASIN_CHECKS = 3  # local fits at most: the first basin and up to two others the surrogate shows
 VALLEY_P = 0.05  # a misfit this unlikely under the noise alone: look along the valley
 VALLEY_RMSE = 1.5  # …if within this many times the noise (beyond, the model is at fault)
@@ -388,17 +391,30 @@ class CalibrationLoop:
         verified: VerifiedPoint | None,
         predicted: float,
     ) -> int:
-        """Verifications in a row without improvement, after ``verified``."""
+        """Verifications in a row without improvement, after ``verified`` — counting only
+        those the surrogate predicted: one whose RMSE it missed by more than ``MISSED`` of
+        it shows a surrogate that had not learned that region, and the run has taught it.
+        (Seen: a model with membrane bending, four parameters, whose curves' surrogate
+        promised 0.96 N and 0.39 N where the solver gave 8.5 N and 4.6 N; the global
+        phase stopped there after 16 runs, and the local phase from its best point, 2.3
+        N, ended in a local optimum at 1.11 N. Going on, the surrogate found the basin
+        of the truth's 0.052 N: ``tests/test_calibrate.py``.) The global phase still
+        ends when the surrogate sees nothing better, or at half the budget.
+        """
         if verified is None:
             return stale + 1
+        missed = abs(verified.rmse - predicted) > MISSED * verified.rmse
         improved = previous is None or verified.rmse < previous.rmse * (1 - SETTLED)
         best = self.best()
         assert best is not None  # verified is one
         self._say(
             f"verified: RMSE {verified.rmse:.4g} N (predicted {predicted:.4g}), "
             f"best {best.rmse:.4g} N, {self.runs.calls} solver calls"
+            + ("" if improved or not missed else "; the surrogate had not learned it there")
         )
-        return 0 if improved else stale + 1
+        if improved:
+            return 0
+        return stale if missed else stale + 1
 
     def _fit(self, model: CurveSurrogate) -> None:
         runs = self.runs
