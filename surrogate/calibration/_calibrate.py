@@ -27,6 +27,7 @@ from .._pool import check_jobs
 from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import distributions, quiet_optuna
 from ..storage._storage import open_storage
+from ..study._space import ParameterSpace
 from ..study._spec import StudySpec
 from ._determination import at_bound_text, interval_text, parameter_interval_text
 from ._fidelity import LOW_FIDELITY_BUDGET, CorrectedCalibration, CorrectedRuns, CurveCorrection
@@ -385,7 +386,7 @@ def _at_bounds(problem: CalibrationProblem, params: Mapping[str, float]) -> str:
     An effect's parameters are left out: their ranges are the effect's own (0 is the
     effect switched off), not the study's to widen."""
     space = problem.spec.space
-    sides = bound_sides(space.to_unit(np.array([[params[name] for name in space.names]]))[0])
+    sides = declared_bound_sides(space, params)
     on = [
         at_bound_text(p.name, int(side), p.low if side < 0 else p.high, "at")
         for p, side in zip(space, sides, strict=True)
@@ -395,6 +396,12 @@ def _at_bounds(problem: CalibrationProblem, params: Mapping[str, float]) -> str:
         return ""
     listed = on[0] if len(on) == 1 else f"{', '.join(on[:-1])} and {on[-1]}"
     return f"; its {listed} — {_widen(len(on))}"
+
+
+def declared_bound_sides(space: ParameterSpace, params: Mapping[str, float]) -> np.ndarray:
+    """:func:`~._local.bound_sides` of the parameters the study file declares (``space``,
+    in its order) at a point ``params`` that may hold an effect's too."""
+    return bound_sides(space.to_unit(np.array([[params[name] for name in space.names]]))[0])
 
 
 def _widen(count: int) -> str:

@@ -60,12 +60,13 @@ from ..storage._storage import open_storage
 from ._calibrate import (
     CalibrationResult,
     calibration_note,
+    declared_bound_sides,
     run_calibration,
     unconverged_reason,
 )
 from ._compare import BANDS, angle_bands
 from ._fidelity import CorrectedCalibration, CorrectedRuns, CurveCorrection
-from ._local import ResidualModel, SolverFailed, bound_sides, local_fit
+from ._local import ResidualModel, SolverFailed, local_fit
 from ._loop import CalibrationLoop, SolverRuns
 from ._problem import (
     CalibrationProblem,
@@ -482,12 +483,9 @@ class _Refits:
         noise, while the truth (a stiffer, thinner coat) fits to the noise: its tie with
         hardening went unseen."""
         space = self.problem.spec.space
-
-        def sides(refit: _Refit) -> np.ndarray:
-            values = np.array([[refit.params[n] for n in space.names]])
-            return bound_sides(space.to_unit(values)[0])
-
-        return bool(np.any((sides(self.refits[name]) != 0) & (sides(self.current) == 0)))
+        candidate = declared_bound_sides(space, self.refits[name].params)
+        current = declared_bound_sides(space, self.current.params)
+        return bool(np.any((candidate != 0) & (current == 0)))
 
     def _recalibrate_all(self, names: list[str]) -> None:
         self.say(f"recalibrating with {', '.join(names)} over the whole parameter space")
