@@ -28,6 +28,7 @@ from surrogate.calibration._synthetic import (
     write_calibration_study,
 )
 from surrogate.study._spec import load_study
+from tests.studies import write_study
 
 SETS = {case["name"]: case for case in calibration_sets()}
 
@@ -76,18 +77,6 @@ def test_a_model_that_cannot_fit_converges_with_a_systematic_misfit(tmp_path):
     assert "systematic" in result.message and "within the noise" not in result.message
 
 
-MEMBRANE_STUDY = """
-[study]
-name = "membrane"
-[parameters]
-ecoat_gpa = { low = 0.5,  high = 4.0, log = true }
-scoat_gpa = { low = 0.05, high = 0.4, log = true }
-tcoat_mm  = { low = 0.01, high = 0.1, log = true }
-[measurements]
-file = "tests.csv"
-"""
-
-
 @pytest.mark.slow
 def test_a_surrogate_that_has_not_learned_the_space_does_not_end_the_global_phase(tmp_path):
     """Strong hidden membrane bending (``benchmarks/diagnosis.py``'s data set 20: six
@@ -103,9 +92,8 @@ def test_a_surrogate_that_has_not_learned_the_space_does_not_end_the_global_phas
     table = synthetic_measurements(
         hidden_effect_tests(20), coating=truth, effects=hidden, noise_n=0.05, seed=20
     )
-    table.to_csv(tmp_path / "tests.csv", index=False)
-    path = tmp_path / "study.toml"
-    path.write_text(MEMBRANE_STUDY)
+    study = '[study]\nname = "membrane"\n[measurements]\nfile = "tests.csv"\n'
+    path = write_study(tmp_path, table, study, ranges=True)  # the diagnosis benchmark's ranges
     result = surrogate.calibrate(path, effects=["membrane_bending"], progress=False)
     at_truth = surrogate.compare(
         path,
