@@ -123,8 +123,8 @@ def test_a_budget_too_small_says_budget_exhausted_and_claims_nothing(tmp_path):
 def test_a_fit_that_stops_with_runs_left_does_not_say_raise_the_budget(tmp_path, monkeypatch):
     """Four rounds whose first-order test found nothing better end the local phase with
     runs left (the test scripted to find nothing, as on a rough response): the message
-    gives the fit's reason and says the budget was not the limit; the same data with a
-    budget that runs out first says to raise it."""
+    gives the fit's reason and says the budget was not the limit (where the budget runs
+    out first it says to raise it: the two tests below)."""
     from surrogate.calibration import _local
 
     def nothing_better(model, x):
@@ -137,9 +137,6 @@ def test_a_fit_that_stops_with_runs_left_does_not_say_raise_the_budget(tmp_path,
     assert "not at a verified local optimum: scripted: nothing better" in stalled.message
     assert "the budget was not the limit" in stalled.message
     assert "raise --budget" not in stalled.message
-    spent = surrogate.calibrate(path, max_solver_calls=stalled.solver_calls - 4, progress=False)
-    assert spent.solver_calls > stalled.solver_calls - 4 - 2  # no other run fits: 2 groups
-    assert "raise --budget" in spent.message and "not the limit" not in spent.message
 
 
 def test_a_budget_spent_at_a_point_within_the_noise_says_the_model_fits_but_not_where(tmp_path):
