@@ -398,7 +398,7 @@ class CalibrationLoop:
         promised 0.96 N and 0.39 N where the solver gave 8.5 N and 4.6 N; the global
         phase stopped there after 16 runs, and the local phase from its best point, 2.3
         N, ended in a local optimum at 1.11 N. Going on, the surrogate found the basin
-        of the truth's 0.052 N: ``tests/test_calibrate.py``.) The global phase still
+        of the truth's 0.052 N: ``tests/test_calibrate_sweep.py``.) The global phase still
         ends when the surrogate sees nothing better, or at half the budget.
         """
         if verified is None:
@@ -495,9 +495,10 @@ class CalibrationLoop:
         prediction. The Optuna TPE search it replaced rebuilt its Parzen estimators at
         every trial, a third of the calibration tests' time; side by side on
         ``benchmarks/calibration.py`` (18 sets × 4 seeds) both reach the noise floor on
-        every set (61 of 64 converged against 62; 62 with the local phase's round rule
-        since), and the diagnosis benchmark names the hidden effect first or tied as
-        often (31 of 32 against 30), 1.9 × faster (README).
+        every set (61 of 64 converged against 62; 64 since, with the local phase's round
+        rule and the global phase's rule on surrogate misses), and the diagnosis
+        benchmark names the hidden effect first or tied as often (31 of 32 against 30),
+        1.9 × faster (README).
         """
         problem, space = self.problem, self.problem.space
 
