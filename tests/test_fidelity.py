@@ -502,6 +502,52 @@ def test_the_trust_region_follows_the_verified_over_predicted_decrease():
     assert after(0.8, 0.10, 0.06, 0.8, None) == pytest.approx(0.8)
 
 
+def test_a_proposal_is_no_worse_on_the_corrected_model_than_the_first_order_tests_point(
+    distorted_solver, log_runs, monkeypatch
+):
+    """Where the corrected model's first-order test at the best verified point found a
+    better point within the trust region, the proposal the expensive solver verifies
+    next is at least as good on the corrected model: ``least_squares`` from the best
+    point alone had stopped short of it (CalculiX's *paper* curves: a step of 0.001
+    promising 1.1 % where the test's step gave 4.2 %). On this solver the early-yield
+    coating is the one of the three truths where it stops short without the rule (by
+    3e-7 of the RMSE: a test of the rule, not of its size)."""
+    case = 2
+    from surrogate.calibration._fidelity import CorrectedCalibration
+    from surrogate.calibration._local import ResidualModel
+
+    tests, compared = [], []
+    test, propose = CorrectedCalibration._test, CorrectedCalibration._next
+
+    def spy_test(self, model, point):
+        tests.append((test(self, model, point), point))
+        return tests[-1][0]
+
+    def spy_next(self):
+        tests.clear()
+        proposal = propose(self)
+        if proposal is None or not tests or tests[-1][0].better is None:
+            return proposal
+        at, best = tests[-1]
+        model = ResidualModel(self.problem, self.corrected_runs(self.correction))
+        if self._within_radius(model, at.better, best):
+            rmse = [
+                float(np.sqrt(np.mean(model.residual(model.pin(theta)) ** 2)))
+                for theta in (proposal, at.better)
+            ]
+            compared.append(rmse)
+        return proposal
+
+    monkeypatch.setattr(CorrectedCalibration, "_test", spy_test)
+    monkeypatch.setattr(CorrectedCalibration, "_next", spy_next)
+    settings = " ".join(f"{k} = {v}" for k, v in THICK.items())
+    path = _calibration_study(log_runs / "cal", BENDING, TRUTHS[case], seed=case, settings=settings)
+    surrogate.calibrate(path, progress=False)
+    assert compared, "no proposal followed a failed test with a better point in the region"
+    for proposal, better in compared:
+        assert proposal <= better * (1.0 + 1e-9)
+
+
 def test_the_probes_run_after_a_corrected_optimum_the_expensive_solver_ran(
     distorted_solver, log_runs, monkeypatch
 ):

@@ -268,7 +268,7 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
         storage=url,
         message="",
     )
-    spent = runs.calls + len(problem.groups) > loop.budget  # no other verification fits
+    spent = not loop.verifications_left()  # no other verification fits
     message = _message(problem, result, fit, budget_spent=spent)
     retried, sentence = _retried(loop, best)
     message += sentence

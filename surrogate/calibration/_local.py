@@ -295,7 +295,10 @@ class LocalFit:
     ``predicted_gain`` the relative RMSE decrease the Gauss–Newton model still
     promises within ``±FIRST_ORDER_BOX`` (None where the test did not run or, in a
     fit, did not hold; :func:`optimum_test` gives it either way);
-    ``converged`` whether the first-order test held; ``message`` says how.
+    ``converged`` whether the first-order test held; ``message`` says how;
+    ``better`` (:func:`optimum_test` only) where the test did not hold, the point it
+    found the solver's RMSE lower at by more than the tolerance (None where it found
+    none).
     ``least_squares`` stops early by its loose default ``ftol``/``xtol``; the
     first-order test, not those, decides when the fit is done.
     """
@@ -309,6 +312,7 @@ class LocalFit:
     predicted_gain: float | None
     converged: bool
     message: str
+    better: np.ndarray | None = None
 
     @property
     def rmse(self) -> float:
@@ -325,6 +329,7 @@ def local_fit(
     jacobian_refresh: int = 5,
     rounds: int = _ROUNDS,
     radius: float | None = None,
+    around: np.ndarray | None = None,
     near: bool = False,
     say: Callable[[str], None] | None = None,
 ) -> LocalFit:
@@ -344,7 +349,9 @@ def local_fit(
     ``radius``: the fit stays within ``±radius`` of ``theta`` in every fit coordinate
     and returns where ``least_squares`` stops there, untested (one round: a proposal
     of a model, such as the multi-fidelity loop's corrected model, for another solver
-    to verify).
+    to verify); ``around``: the region's centre instead (``theta``, a better start
+    within it, such as the first-order test's point: ``least_squares`` ends no worse
+    than its start).
 
     ``near``: ``theta`` is near a local optimum already (the best point a model of the
     solver led to, verified by it): each round is the first-order test alone — a fresh
@@ -362,7 +369,8 @@ def local_fit(
     reason = "no round run"
     low, high = np.zeros(x.size), np.ones(x.size)
     if radius is not None:
-        low, high = np.maximum(low, x - radius), np.minimum(high, x + radius)
+        centre = x if around is None else model.pin(around)
+        low, high = np.maximum(low, centre - radius), np.minimum(high, centre + radius)
     try:
         if model.evaluate(x)[1] is None:
             raise SolverFailed(model.runs.failures[-1] if model.runs.failures else "solver failed")
@@ -417,7 +425,8 @@ def optimum_test(model: ResidualModel, theta: np.ndarray) -> LocalFit:
         raise SolverFailed(model.runs.failures[-1] if model.runs.failures else "solver failed")
     test = _first_order_test(model, x)
     fit = _result(model, x, np.zeros(x.size, dtype=int), test if test.holds else None, test.message)
-    return replace(fit, predicted_gain=test.predicted_gain)
+    better = None if test.verified_gain is None else model.point(test.better)
+    return replace(fit, predicted_gain=test.predicted_gain, better=better)
 
 
 @dataclass(frozen=True)

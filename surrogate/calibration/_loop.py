@@ -281,6 +281,12 @@ class CalibrationLoop:
     def best(self) -> VerifiedPoint | None:
         return min(self.verified, key=lambda v: v.rmse) if self.verified else None
 
+    def verifications_left(self, budget: int | None = None) -> int:
+        """How many more verifications — a run at every condition group each — fit within
+        the budget (``budget``: a phase's own limit instead of the loop's)."""
+        limit = self.budget if budget is None else budget
+        return max(0, (limit - self.runs.calls) // len(self.problem.groups))
+
     def converged_at_best(self) -> bool:
         """Whether the best verified point is a local optimum the first-order test passed."""
         fit, best = self.best_fit(), self.best()
@@ -302,9 +308,8 @@ class CalibrationLoop:
             self._local(residuals, start)
             # a better point found on the last pass would be left unfitted: none is sought
             start = self._other_basin(model, surrogate_trials) if check + 1 < BASIN_CHECKS else None
-        G = len(self.problem.groups)
         for theta in self._valley_starts():
-            if self.runs.calls + G > self.budget:
+            if not self.verifications_left():
                 break
             record = self._verify(theta, None)
             if record is not None:
@@ -336,8 +341,7 @@ class CalibrationLoop:
         the model's, not the start's.
         """
         fit = self.best_fit()
-        G = len(self.problem.groups)
-        if fit is None or not fit.converged or self.runs.calls + 2 * G > self.budget:
+        if fit is None or not fit.converged or self.verifications_left() < 2:
             return []
         p_value = self.p_value(fit)
         if p_value >= VALLEY_P or fit.rmse > VALLEY_RMSE * self.noise:
@@ -356,8 +360,8 @@ class CalibrationLoop:
         G = len(self.problem.groups)
         self._initial_design()
         # the local phase needs what is left: the global phase takes at most half the budget
-        stale, budget = 0, max(self.budget // 2, self.runs.calls + G)
-        while self.runs.calls + G <= budget and len(self.runs.X) >= 3:
+        stale, half = 0, max(self.budget // 2, self.runs.calls + G)
+        while self.verifications_left(half) and len(self.runs.X) >= 3:
             self.iterations += 1
             self._fit(model)
             candidate, predicted = self._search(model, surrogate_trials)
@@ -447,8 +451,7 @@ class CalibrationLoop:
     def _other_basin(self, model: CurveSurrogate, surrogate_trials: int) -> VerifiedPoint | None:
         """A verified start in another basin the surrogate shows, or None."""
         best = self.best_fit()
-        G = len(self.problem.groups)
-        if best is None or not best.converged or self.runs.calls + G > self.budget:
+        if best is None or not best.converged or not self.verifications_left():
             return None
         self.iterations += 1
         self._fit(model)
