@@ -296,9 +296,9 @@ class LocalFit:
     promises within ``±FIRST_ORDER_BOX`` (None where the test did not run or, in a
     fit, did not hold; :func:`optimum_test` gives it either way);
     ``converged`` whether the first-order test held; ``message`` says how;
-    ``better`` (:func:`optimum_test` only) where the test did not hold, the point it
-    found the solver's RMSE lower at by more than the tolerance (None where it found
-    none).
+    ``better`` (:func:`optimum_test` only) where the test did not hold, the point at
+    which the solver's RMSE was lower by more than the tolerance (None where the test
+    found none).
     ``least_squares`` stops early by its loose default ``ftol``/``xtol``; the
     first-order test, not those, decides when the fit is done.
     """
