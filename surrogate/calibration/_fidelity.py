@@ -75,6 +75,12 @@ SHRINK_BELOW, EXPAND_ABOVE = 0.25, 0.75  # ratios: a quarter of the step / twice
 MIN_RADIUS = FIRST_ORDER_BOX / BACKTRACK[-1]  # the smallest step the first-order test tries
 
 
+def _step(model: ResidualModel, theta: np.ndarray, best: VerifiedPoint) -> float:
+    """How far ``theta`` lies from the best verified point in fit coordinates (the
+    largest coordinate's step: the trust region's measure)."""
+    return float(np.max(np.abs(model.pin(theta) - model.pin(best.theta))))
+
+
 class CurveCorrection:
     """``δ`` of whole curves (all angles but 0°, where both are zero by definition).
 
@@ -360,7 +366,7 @@ class CorrectedCalibration(CalibrationLoop):
             if test.converged:
                 return None
             start = best.theta
-            if test.better is not None and self._within_radius(model, test.better, best):
+            if test.better is not None and _step(model, test.better, best) <= self.radius:
                 start = test.better  # least_squares alone had stopped short of it
             fit = local_fit(model, start, radius=self.radius, around=best.theta)
             at_best = float(np.sqrt(np.mean(model.residual(model.pin(best.theta)) ** 2)))
@@ -374,13 +380,9 @@ class CorrectedCalibration(CalibrationLoop):
         keys = set(self.runs.keys(np.repeat(fit.theta[None, :], G, axis=0), range(G)))
         if any(keys == set(point.keys) for point in self.verified):
             return None
-        step = float(np.max(np.abs(model.pin(fit.theta) - model.pin(best.theta))))
+        step = _step(model, fit.theta, best)
         self._proposal = (best.rmse, best.rmse - (at_best - fit.rmse), step)
         return np.asarray(fit.theta, dtype=float)
-
-    def _within_radius(self, model: ResidualModel, theta: np.ndarray, best: VerifiedPoint) -> bool:
-        """Whether ``theta`` lies within the trust region around the best verified point."""
-        return bool(np.max(np.abs(model.pin(theta) - model.pin(best.theta))) <= self.radius)
 
     def _manage_radius(self, taught: bool) -> None:
         """The trust region after a proposal was verified: ``ρ`` = the verified decrease of
