@@ -211,20 +211,21 @@ def _calibrate_in_a_process(path, threads):
 @pytest.mark.slow
 def test_the_calibrated_point_does_not_depend_on_threads_or_one_ulp(tmp_path):
     """BLAS threads (1 and 2) and a 1e-12 relative change of every measured force move
-    the calibrated D and Mp by less than their stated 95 % intervals."""
+    the calibrated D and Mp by less than their stated 95 % intervals: one calibration
+    with one thread on the data, one with two threads on the data changed by an ulp
+    (both changes at once: a calibration fewer than checking each alone, as this test
+    did until stop 42, passing on every machine it ran on)."""
     case = SETS["mid-n1"]
     one = _calibrate_in_a_process(write_calibration_study(tmp_path / "t1", case), 1)
-    two = _calibrate_in_a_process(write_calibration_study(tmp_path / "t2", case), 2)
     path = write_calibration_study(tmp_path / "ulp", case)
     table = pd.read_csv(tmp_path / "ulp" / "tests.csv")
     rng = np.random.default_rng(7)
     table["force_n"] *= 1.0 + 1e-12 * rng.standard_normal(len(table))
     table.to_csv(tmp_path / "ulp" / "tests.csv", index=False, float_format="%.17g")
-    ulp = surrogate.calibrate(path, progress=False, record=False).to_json()
-    for result in (one, two, ulp):
+    other = _calibrate_in_a_process(path, 2)
+    for result in (one, other):
         assert result["status"] == "converged", result["message"]
     reference = one["determination"]["combinations"]
-    for other in (two, ulp):
-        for key, values in other["determination"]["combinations"].items():
-            stated = reference[key]["relative_half_width"]
-            assert abs(values["value"] / reference[key]["value"] - 1.0) <= stated, key
+    for key, values in other["determination"]["combinations"].items():
+        stated = reference[key]["relative_half_width"]
+        assert abs(values["value"] / reference[key]["value"] - 1.0) <= stated, key

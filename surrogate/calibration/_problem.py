@@ -174,10 +174,11 @@ class CalibrationProblem:
 
     # -- misfit --------------------------------------------------------------------------------
     def model_at_points(self, curves: np.ndarray) -> np.ndarray:
-        """Model force at every measured point from (G, A) curves on whole degrees."""
-        c = curves[self.point_group]
-        rows = np.arange(self.point_group.size)
-        return c[rows, self._lo] * (1.0 - self._w) + c[rows, self._lo + 1] * self._w
+        """Model force at every measured point (P,) from (G, A) curves on whole degrees,
+        or at every point of each of (m, G, A) curve sets (m, P): linear between the
+        two whole degrees around each measured angle."""
+        g, lo = self.point_group, self._lo
+        return curves[..., g, lo] * (1.0 - self._w) + curves[..., g, lo + 1] * self._w
 
     def residuals(self, curves: np.ndarray) -> np.ndarray:
         """Measured minus model at every measured point."""
@@ -191,14 +192,9 @@ class CalibrationProblem:
         rms = np.sqrt(r2 / self._count)
         return {str(t): float(v) for t, v in zip(self.test_ids, rms, strict=True)}
 
-    def _batch_points(self, curves: np.ndarray) -> np.ndarray:
-        rows = np.arange(self.point_group.size)
-        c = curves[:, self.point_group]  # (m, P, A)
-        return c[:, rows, self._lo] * (1.0 - self._w) + c[:, rows, self._lo + 1] * self._w
-
     def batch_rmse(self, curves: np.ndarray) -> np.ndarray:
         """RMSE of each of (m, G, A) curve sets."""
-        residual = self.measured_n - self._batch_points(curves)
+        residual = self.measured_n - self.model_at_points(curves)
         return np.sqrt(np.mean(residual**2, axis=1))
 
     def features(self, X: np.ndarray, groups: np.ndarray) -> np.ndarray:

@@ -8,6 +8,7 @@ calibration all take this one path, so an effect changes each of them alike.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from typing import Any
 
@@ -58,13 +59,38 @@ def model_state_of(
     """What a solver sees for one test: the coating validated, the rig of the test's
     conditions, every effect applied in turn (the one path for every solver)."""
     enabled = {name: get_effect(name) for name in (effects or {})}
-    reads = [column for effect in enabled.values() for column in effect.reads]
-    checked = check_conditions(conditions, read_by_effects=reads)
-    state = coating_state(ecoat_gpa, scoat_gpa, tcoat_mm, rig_for(rig, checked))
+    reads = tuple(column for effect in enabled.values() for column in effect.reads)
+    checked, test_rig = _test_rig(rig, conditions, reads)
+    state = coating_state(ecoat_gpa, scoat_gpa, tcoat_mm, test_rig)
     for name, values in (effects or {}).items():
         effect = enabled[name]
         state = effect.apply(state, effect.resolve(values), checked)
     return state
+
+
+def _test_rig(
+    rig: Rig, conditions: Mapping[str, Any] | None, reads: tuple[str, ...]
+) -> tuple[dict[str, Any], Rig]:
+    """A test's checked conditions and its rig (:func:`check_conditions`,
+    :func:`rig_for`), remembered for the few condition sets of a calibration: the
+    search asks for the model state of ~10⁵ points at the same few tests. Conditions
+    that cannot be a key (a plug-in column holding a list) are checked each time."""
+    items = tuple((name, value, type(value)) for name, value in (conditions or {}).items())
+    try:
+        checked, test_rig = _checked_test_rig(rig, items, reads)
+    except TypeError:  # unhashable: not remembered
+        checked = check_conditions(conditions, read_by_effects=reads)
+        return checked, rig_for(rig, checked)
+    return dict(checked), test_rig  # a copy: an effect may not change what others see
+
+
+@functools.lru_cache(maxsize=256)
+def _checked_test_rig(
+    rig: Rig, items: tuple[tuple[str, Any, type], ...], reads: tuple[str, ...]
+) -> tuple[dict[str, Any], Rig]:
+    """(keyed by each value's type too: 1 and 1.0 and True are one key otherwise)"""
+    checked = check_conditions({n: v for n, v, _ in items}, read_by_effects=reads)
+    return checked, rig_for(rig, checked)
 
 
 def model_state(inputs: Mapping[str, Any]) -> ModelState:

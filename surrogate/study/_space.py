@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -101,9 +102,9 @@ class ParameterSpace:
     def of(cls, specs: Iterable[ParameterSpec]) -> ParameterSpace:
         return cls(tuple(specs))
 
-    @property
+    @cached_property
     def names(self) -> tuple[str, ...]:
-        return tuple(p.name for p in self.parameters)
+        return tuple(p.name for p in self.parameters)  # once: the search asks ~10⁵ times
 
     def __iter__(self) -> Iterator[ParameterSpec]:
         return iter(self.parameters)
