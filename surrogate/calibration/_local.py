@@ -255,6 +255,11 @@ class ResidualModel:
         )
         return self.jacobian(x) @ dx_du
 
+    def evaluated(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The parameters and curves (G, A) of every point evaluated so far, in order (a
+        failed run's point left out)."""
+        return [(self._pinned[k], c) for k, (_, c) in self._memo.items() if c is not None]
+
     def best_evaluated(self) -> np.ndarray | None:
         """The x point of lowest RSS among those evaluated (failures excluded), if any."""
         done = [(float(r @ r), k) for k, (r, c) in self._memo.items() if c is not None]
