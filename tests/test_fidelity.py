@@ -566,7 +566,8 @@ def test_a_stalled_trust_region_teaches_the_correction_the_expensive_tests_runs(
     Scripted stall: a region below its whole range stalls, so the first proposal does.
     The data hide a tension effect the model lacks: the misfit stays systematic. The
     same calibration with the expensive local phase going on after the round (the
-    rule before) spends more expensive runs for no better a point."""
+    rule before) spends more expensive runs for no better a point. Where the budget left
+    cannot hold the expensive test, it is not started."""
     from surrogate.calibration import _fidelity
     from surrogate.calibration._calibrate import run_calibration
 
@@ -575,12 +576,12 @@ def test_a_stalled_trust_region_teaches_the_correction_the_expensive_tests_runs(
     thin_soft, thick = TRUTHS[1], " ".join(f"{k} = {v}" for k, v in THICK.items())
     hidden = {"tension": {"k_e": 0.006, "k_s": 0.006}}
 
-    def calibrate(folder, expensive_round):
+    def calibrate(folder, expensive_round, budget=None):
         monkeypatch.setattr(_fidelity.CorrectedCalibration, "_expensive_round", expensive_round)
         path = _calibration_study(
             log_runs / folder, DIAGNOSIS_TESTS, thin_soft, hidden=hidden, seed=1, settings=thick
         )
-        return run_calibration(path, progress=False, record=False)
+        return run_calibration(path, progress=False, record=False, max_solver_calls=budget)
 
     rounds = []
 
@@ -604,6 +605,42 @@ def test_a_stalled_trust_region_teaches_the_correction_the_expensive_tests_runs(
     assert before_rule.status == "converged", before_rule.message
     assert found.solver_calls < before_rule.solver_calls
     assert found.rmse_n <= before_rule.rmse_n * (1.0 + 1e-3)
+
+    # a budget that cannot hold the test (its Jacobian and a step) does not start it:
+    # nothing is spent on runs that could tell nothing, and the message says to raise it
+    short, loop = calibrate("short", shipped, budget=calls + (p + 1) * G - 1)
+    assert short.solver_calls == calls and loop.short is not None, loop.short
+    assert short.status == "budget_exhausted" and "raise --budget" in short.message
+
+
+@pytest.mark.slow
+def test_a_stall_at_a_point_the_expensive_test_brings_within_the_noise_certifies_it(
+    distorted_solver, log_runs, monkeypatch
+):
+    """The other side of the rule above: where the expensive test's step verified a point
+    whose misfit the noise explains, what is left is the certificate, not a gain the data
+    can tell: the expensive solver's own local phase goes on from there instead of a
+    proposal of the corrected model (on the distorted solver's 1 % ripple such a
+    proposal spent the two runs the certificate needed). Scripted stall as above."""
+    from surrogate.calibration import _fidelity
+    from surrogate.calibration._calibrate import run_calibration
+
+    monkeypatch.setattr(_fidelity, "MIN_RADIUS", 1.01)
+    shipped, rounds = _fidelity.CorrectedCalibration._expensive_round, []
+
+    def spy(self):
+        before = self.best().rmse
+        rounds.append((before, shipped(self), self.best()))
+        return rounds[-1][1]
+
+    monkeypatch.setattr(_fidelity.CorrectedCalibration, "_expensive_round", spy)
+    settings = " ".join(f"{k} = {v}" for k, v in THICK.items())
+    path = _calibration_study(log_runs / "cal", BENDING, TRUTHS[0], seed=1, settings=settings)
+    found, loop = run_calibration(path, progress=False, record=False)
+    (before, handed_back, better), *_ = rounds
+    assert better.rmse < before and loop.p_value_at(better) >= 0.01  # within the noise
+    assert not handed_back and loop.fallen_back is not None  # the expensive local phase
+    assert found.status == "converged" and found.misfit == "within the noise", found.message
 
 
 def test_the_probes_run_after_a_corrected_optimum_the_expensive_solver_ran(

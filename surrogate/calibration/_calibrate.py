@@ -268,7 +268,7 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
         storage=url,
         message="",
     )
-    spent = not loop.verifications_left()  # no other verification fits
+    spent = loop.budget_spent()
     message = _message(problem, result, fit, budget_spent=spent)
     retried, sentence = _retried(loop, best)
     message += sentence

@@ -287,6 +287,10 @@ class CalibrationLoop:
         limit = self.budget if budget is None else budget
         return max(0, (limit - self.runs.calls) // len(self.problem.groups))
 
+    def budget_spent(self) -> bool:
+        """Whether the budget is what stopped the loop: no further verification fits."""
+        return not self.verifications_left()
+
     def converged_at_best(self) -> bool:
         """Whether the best verified point is a local optimum the first-order test passed."""
         fit, best = self.best_fit(), self.best()
