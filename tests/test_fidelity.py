@@ -606,9 +606,9 @@ def test_a_stalled_trust_region_teaches_the_correction_the_expensive_tests_runs(
     assert found.solver_calls < before_rule.solver_calls
     assert found.rmse_n <= before_rule.rmse_n * (1.0 + 1e-3)
 
-    # a budget that cannot hold the test (its Jacobian and a step) does not start it:
-    # nothing is spent on runs that could tell nothing, and the message says to raise it
-    short, loop = calibrate("short", shipped, budget=calls + (p + 1) * G - 1)
+    # a budget that cannot hold the test's Jacobian does not start it: nothing is spent
+    # on runs that could tell nothing, and the message says to raise it
+    short, loop = calibrate("short", shipped, budget=calls + p * G - 1)
     assert short.solver_calls == calls and loop.short is not None, loop.short
     assert short.status == "budget_exhausted" and "raise --budget" in short.message
 

@@ -497,18 +497,19 @@ class CorrectedCalibration(CalibrationLoop):
         return True
 
     def _test_fits(self) -> bool:
-        """Whether the budget left holds the expensive solver's first-order test — its
-        Jacobian and a step, p + 1 verifications; else ``short`` says why it is not
-        started (on CalculiX's *paper* curves 4 runs of a Jacobian that could not finish
-        were 12 minutes for nothing)."""
-        needed = len(self.problem.space) + 1
+        """Whether the budget left holds the expensive solver's first-order test: its
+        Jacobian, p verifications (a test that holds needs no step; one that does not
+        needs at least one more); else ``short`` says why it is not started (on
+        CalculiX's *paper* curves 4 runs of a Jacobian that could not finish were 12
+        minutes for nothing)."""
+        needed = len(self.problem.space)
         left = self.verifications_left()
         if left >= needed or self.short is not None:
             return left >= needed
         G = len(self.problem.groups)
         self.short = (
             f"{left * G} expensive run(s) left, short of the {needed * G} of the expensive "
-            "solver's first-order test (its Jacobian and a step): not started"
+            "solver's first-order test's Jacobian: not started"
         )
         self._say(self.short)
         return False
