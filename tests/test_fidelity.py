@@ -611,6 +611,7 @@ def test_a_stalled_trust_region_teaches_the_correction_the_expensive_tests_runs(
     short, loop = calibrate("short", shipped, budget=calls + p * G - 1)
     assert short.solver_calls == calls and loop.short is not None, loop.short
     assert short.status == "budget_exhausted" and "raise --budget" in short.message
+    assert "short of the" in short.message  # why: the fit at the best point says it
 
 
 @pytest.mark.slow

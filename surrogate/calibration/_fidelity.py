@@ -57,6 +57,7 @@ from ._local import (
     SolverFailed,
     local_fit,
     optimum_test,
+    untested_fit,
 )
 from ._loop import (
     CalibrationLoop,
@@ -190,7 +191,6 @@ class CorrectedCalibration(CalibrationLoop):
         self.radius = 1.0  # the trust region of the proposals, in fit coordinates
         self._proposal: tuple[float, float, float] | None = None  # best, predicted RMSE, step
         self.stalled: str | None = None  # why the corrected model's proposals stopped
-        self.expensive_rounds = 0  # the expensive solver's first-order tests where they stalled
         self.short: str | None = None  # why an expensive test was not started: the budget left
         self.inherited = bool(self.correction.n_runs)  # learned on another model
 
@@ -456,20 +456,20 @@ class CorrectedCalibration(CalibrationLoop):
             return False
         self._say("at the best verified point; its runs teach the correction")
         residuals = ResidualModel(self.problem, self.runs, budget=self.budget)
-        self.expensive_rounds += 1
         try:
             test = optimum_test(residuals, best.theta)
         except (SolverFailed, BudgetSpent) as failed:
             self._say(f"the expensive first-order test did not finish: {failed}")
             return False
+        finally:  # every run it made, whatever it found
+            taught = {key for point in self.verified for key in point.keys}
+            for theta, curves in residuals.evaluated():
+                if residuals.keys(theta)[0] not in taught:
+                    self._learn(theta, curves)
         self.fits = [f for f in self.fits if not np.array_equal(f.theta, best.theta)] + [test]
         self._say(f"at the best verified point (RMSE {best.rmse:.4g} N): {test.message}")
         if test.converged or test.better is None:
             return False
-        taught = {key for point in self.verified for key in point.keys}
-        for theta, curves in residuals.evaluated():
-            if residuals.keys(theta)[0] not in taught:
-                self._learn(theta, curves)
         better = next(c for theta, c in residuals.evaluated() if np.array_equal(theta, test.better))
         self.verified.append(
             VerifiedPoint(
@@ -509,9 +509,9 @@ class CorrectedCalibration(CalibrationLoop):
         G = len(self.problem.groups)
         self.short = (
             f"{left * G} expensive run(s) left, short of the {needed * G} of the expensive "
-            "solver's first-order test's Jacobian: not started"
+            "solver's first-order test's Jacobian"
         )
-        self._say(self.short)
+        self._say(f"{self.short}: not started")
         return False
 
     def budget_spent(self) -> bool:
@@ -657,14 +657,14 @@ class CorrectedCalibration(CalibrationLoop):
             residuals = ResidualModel(self.problem, self.runs, budget=self.budget)
             self._local(residuals, start, near=near)
             return
-        # nothing more is run, but the best point keeps a fit of what was (a diagnosis's
-        # confirmation reads its residual): a local fit with no run left to spend
+        # nothing more is run, but the best point keeps a fit saying why (a diagnosis's
+        # confirmation reads its residual), in place of its corrected-model test's
         nothing_left = ResidualModel(self.problem, self.runs, budget=self.runs.calls)
         try:
-            fit = local_fit(nothing_left, start.theta, near=True)
-        except (SolverFailed, BudgetSpent):
+            fit = untested_fit(nothing_left, start.theta, f"{self.short}")
+        except SolverFailed:
             return
-        self.fits.append(replace(fit, message=f"not at a verified local optimum: {self.short}"))
+        self.fits = [f for f in self.fits if not np.array_equal(f.theta, start.theta)] + [fit]
 
     def basin_caveat(self) -> str:
         """What a systematic misfit at a converged point cannot rule out here, and what

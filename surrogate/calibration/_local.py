@@ -434,6 +434,16 @@ def optimum_test(model: ResidualModel, theta: np.ndarray) -> LocalFit:
     return replace(fit, predicted_gain=test.predicted_gain, better=better)
 
 
+def untested_fit(model: ResidualModel, theta: np.ndarray, reason: str) -> LocalFit:
+    """A :class:`LocalFit` at ``theta`` itself, untested (``reason``: why not): its
+    residual, and its Jacobian where the runs it needs are done or within the budget
+    (NaN else). Raises :class:`SolverFailed` if the solver fails at ``theta``."""
+    x = model.pin(theta)
+    if model.evaluate(x)[1] is None:
+        raise SolverFailed(model.runs.failures[-1] if model.runs.failures else "solver failed")
+    return _result(model, x, np.zeros(x.size, dtype=int), None, reason)
+
+
 @dataclass(frozen=True)
 class _FirstOrderTest:
     """The first-order test at a point (see the module's docstring)."""
