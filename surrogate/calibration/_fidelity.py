@@ -466,23 +466,12 @@ class CorrectedCalibration(CalibrationLoop):
             for theta, curves in residuals.evaluated():
                 if residuals.keys(theta)[0] not in taught:
                     self._learn(theta, curves)
-        self.fits = [f for f in self.fits if not np.array_equal(f.theta, best.theta)] + [test]
+        self._keep_fit(test)
         self._say(f"at the best verified point (RMSE {best.rmse:.4g} N): {test.message}")
         if test.converged or test.better is None:
             return False
         better = next(c for theta, c in residuals.evaluated() if np.array_equal(theta, test.better))
-        self.verified.append(
-            VerifiedPoint(
-                theta=test.better,
-                rmse=self.problem.rmse(better),
-                per_test=self.problem.rmse_per_test(better),
-                predicted=None,
-                keys=residuals.keys(test.better),
-                curves=better,
-                calls=self.runs.calls,
-                phase="local",
-            )
-        )
+        self._verified_locally(test.better, better, residuals.keys(test.better))
         point = self.verified[-1]
         self._say(
             f"verified: RMSE {point.rmse:.4g} N (the expensive solver's step), "
@@ -517,11 +506,15 @@ class CorrectedCalibration(CalibrationLoop):
     def budget_spent(self) -> bool:
         return super().budget_spent() or self.short is not None
 
+    def _keep_fit(self, fit: LocalFit) -> None:
+        """``fits`` keeps the latest fit of each point: ``fit`` replaces any at its point."""
+        self.fits = [f for f in self.fits if not np.array_equal(f.theta, fit.theta)] + [fit]
+
     def _test(self, model: ResidualModel, point: VerifiedPoint) -> LocalFit:
         """The corrected model's first-order test at a verified point; ``fits`` keeps the
         latest test of each point (raises :class:`SolverFailed`)."""
         at = self._at_verified(optimum_test(model, point.theta), point)
-        self.fits = [f for f in self.fits if not np.array_equal(f.theta, point.theta)] + [at]
+        self._keep_fit(at)
         self._say(f"at the best verified point (RMSE {point.rmse:.4g} N): {at.message}")
         return at
 
@@ -659,12 +652,12 @@ class CorrectedCalibration(CalibrationLoop):
             return
         # nothing more is run, but the best point keeps a fit saying why (a diagnosis's
         # confirmation reads its residual), in place of its corrected-model test's
+        assert self.short is not None  # set by _test_fits
         nothing_left = ResidualModel(self.problem, self.runs, budget=self.runs.calls)
         try:
-            fit = untested_fit(nothing_left, start.theta, f"{self.short}")
+            self._keep_fit(untested_fit(nothing_left, start.theta, self.short))
         except SolverFailed:
             return
-        self.fits = [f for f in self.fits if not np.array_equal(f.theta, start.theta)] + [fit]
 
     def basin_caveat(self) -> str:
         """What a systematic misfit at a converged point cannot rule out here, and what

@@ -377,8 +377,7 @@ def local_fit(
         centre = x if around is None else model.pin(around)
         low, high = np.maximum(low, centre - radius), np.minimum(high, centre + radius)
     try:
-        if model.evaluate(x)[1] is None:
-            raise SolverFailed(model.runs.failures[-1] if model.runs.failures else "solver failed")
+        _check_solved(model, x)
         round_, stalled = 0, 0
         while stalled < (rounds if radius is None else 1):
             round_ += 1
@@ -421,13 +420,19 @@ def local_fit(
     return _result(model, x, active, None, reason)
 
 
+def _check_solved(model: ResidualModel, x: np.ndarray) -> None:
+    """Raise :class:`SolverFailed` (with the solver's reason) where the solver fails at
+    ``x``, the point a fit or a test starts from."""
+    if model.evaluate(x)[1] is None:
+        raise SolverFailed(model.runs.failures[-1] if model.runs.failures else "solver failed")
+
+
 def optimum_test(model: ResidualModel, theta: np.ndarray) -> LocalFit:
     """The first-order test at ``theta`` itself, without moving: a :class:`LocalFit` at
     ``theta`` (``converged`` where the test holds). Raises :class:`SolverFailed` if the
     solver fails at ``theta``."""
     x = model.pin(theta)
-    if model.evaluate(x)[1] is None:
-        raise SolverFailed(model.runs.failures[-1] if model.runs.failures else "solver failed")
+    _check_solved(model, x)
     test = _first_order_test(model, x)
     fit = _result(model, x, np.zeros(x.size, dtype=int), test if test.holds else None, test.message)
     better = None if test.verified_gain is None else model.point(test.better)
@@ -439,8 +444,7 @@ def untested_fit(model: ResidualModel, theta: np.ndarray, reason: str) -> LocalF
     residual, and its Jacobian where the runs it needs are done or within the budget
     (NaN else). Raises :class:`SolverFailed` if the solver fails at ``theta``."""
     x = model.pin(theta)
-    if model.evaluate(x)[1] is None:
-        raise SolverFailed(model.runs.failures[-1] if model.runs.failures else "solver failed")
+    _check_solved(model, x)
     return _result(model, x, np.zeros(x.size, dtype=int), None, reason)
 
 

@@ -436,20 +436,25 @@ class CalibrationLoop:
             self._say(f"local phase not started: {failed}")
             return
         self.fits.append(fit)
+        self._verified_locally(fit.theta, fit.curves, residuals.keys(fit.theta))
+        self._say(
+            f"local phase: RMSE {fit.rmse:.4g} N, {self.runs.calls} solver calls; {fit.message}"
+        )
+
+    def _verified_locally(self, theta: np.ndarray, curves: np.ndarray, keys: list[str]) -> None:
+        """Record a point a local phase's solver runs verified (``keys``: their cache keys):
+        no prediction, the solver runs used so far."""
         self.verified.append(
             VerifiedPoint(
-                theta=fit.theta,
-                rmse=fit.rmse,
-                per_test=self.problem.rmse_per_test(fit.curves),
+                theta=theta,
+                rmse=self.problem.rmse(curves),
+                per_test=self.problem.rmse_per_test(curves),
                 predicted=None,
-                keys=residuals.keys(fit.theta),
-                curves=fit.curves,
+                keys=keys,
+                curves=curves,
                 calls=self.runs.calls,
                 phase="local",
             )
-        )
-        self._say(
-            f"local phase: RMSE {fit.rmse:.4g} N, {self.runs.calls} solver calls; {fit.message}"
         )
 
     def _other_basin(self, model: CurveSurrogate, surrogate_trials: int) -> VerifiedPoint | None:
