@@ -26,7 +26,7 @@ import shutil
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -61,7 +61,7 @@ KINDS: tuple[tuple[str, Callable[[str], bool]], ...] = (
 TEST_FILE = re.compile(r"\((tests/[\w/]+\.py):\d+\)")
 
 
-def samples(path: Path) -> collections.abc.Iterator[tuple[str, int]]:
+def samples(path: Path) -> Iterator[tuple[str, int]]:
     """``(stack, count)`` of every line of a py-spy raw (collapsed-stack) file."""
     for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
         stack, _, count = line.rpartition(" ")
@@ -86,8 +86,11 @@ def report(path: Path) -> str:
     lines = [f"{total} samples ({total / RATE_HZ:.0f} s of runnable Python at {RATE_HZ} Hz)"]
     lines += ["", "kind of work"]
     lines += [f"  {n / total:6.1%}  {name}" for name, n in kinds.most_common()]
-    lines += ["", "test file on the stack (a forked child's is its test's; none: pytest itself"]
-    lines[-1] += " and the interpreters the tests start, but for a test module run as a script)"
+    lines += [
+        "",
+        "test file on the stack (a forked child's is its test's; none: pytest itself and the "
+        "interpreters the tests start, but for a test module run as a script)",
+    ]
     lines += [f"  {n / total:6.1%}  {name}" for name, n in files.most_common(15)]
     return "\n".join(lines)
 
