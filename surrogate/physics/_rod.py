@@ -44,10 +44,11 @@ tangent at the clamp edge: node 0 carries the spring moment
 
 Speed: one curve is a few hundred iterates of about a hundred unknowns, where
 numpy's overhead per call, not arithmetic, would set the pace. The residual,
-the Jacobian and the linear solve of an iterate are therefore compiled loops
-(numba: ``_evaluate_kernel``, ``_newton_direction``; compiled at the first
-call, some seconds, and cached on disk next to this file); the load stepping,
-Newton's globalisation and the active set stay in Python. A kernel writes an
+the Jacobian and the linear solve of an iterate, and Newton's iterations of a
+load step with their line search, are therefore compiled loops (numba:
+``_evaluate_kernel``, ``_newton_direction``, ``_newton_kernel``; compiled at the
+first call, some seconds, and cached on disk next to this file); the load
+stepping, the active set and the initial-stiffness fallback stay in Python. A kernel writes an
 iterate's node-wise quantities into the rows of one ``fields`` array and its
 scalars into ``info`` (the ``_ROW_*`` and ``_INFO_*`` indices);
 :class:`_Evaluation` reads them by name.
@@ -909,12 +910,6 @@ class _Problem:
         parts = _jacobian_kernel(ev.fields, ev.info, ev.lam, stiff, *ev.loads, *self.rod)
         return _Jacobian(*parts)
 
-    def newton_direction(self, ev: _Evaluation, stiff: np.ndarray | None) -> np.ndarray | None:
-        """``−J⁻¹·residual``; None where ``J`` is singular."""
-        stiff = ev.stiff if stiff is None else stiff
-        delta, regular = _newton_direction(ev.fields, ev.info, ev.lam, stiff, *ev.loads, *self.rod)
-        return delta if regular else None
-
     def forces(self, ev: _Evaluation) -> tuple[float, float]:
         """Resultant and perpendicular force on the probe [N]: ``lam·n − f·t``."""
         info = ev.info
@@ -940,49 +935,84 @@ def _newton(
     at its yield point). Where a node's tangent changed between the last two
     iterates, its secant slope replaces the tangent, and a backtracking line
     search on the scaled residual guards the step: together they stop the
-    cycling of plain Newton when a fibre sits at its yield point.
+    cycling of plain Newton when a fibre sits at its yield point. The
+    iterations run compiled (:func:`_newton_kernel`).
     """
-    preferred = None
+    converged, psi, lam, fields, info, overstress = _newton_kernel(
+        psi,
+        float(lam),
+        float(theta),
+        problem.ell,
+        _UNLOADING_FLOOR * problem.elastic_stiff,
+        *problem.loads,
+        *problem.rod,
+        *problem.section.fibres,
+        *previous.reference,
+    )
+    if not converged:
+        return None
+    return _Evaluation(
+        psi, lam, fields, info, overstress, problem.loads, float(info[_INFO_MERIT]), True
+    )
 
-    def attempt(psi: np.ndarray, lam: float) -> _Evaluation:
-        nonlocal preferred
-        ev = problem.evaluate(psi, lam, theta, previous, preferred)
-        if ev.on_segment:
-            preferred = int(ev.info[_INFO_SEGMENT])
-        return ev
 
-    ev = attempt(psi, lam)
-    stiff = None
-    best, since_best = ev.merit, 0
+@njit(cache=True)
+def _newton_kernel(psi, lam, theta, ell, unloading, *flat):
+    """:func:`_newton`'s iterations: whether they converged, and the last iterate's
+    ``psi``, ``lam``, ``fields``, ``info`` and overstress. ``unloading``: the floor of a
+    node's tangent after a step the line search shortened; ``flat`` as
+    :func:`_evaluate_kernel`'s."""
+    preferred = -1  # the contact segment to keep (see _nearest_point)
+    fields, info, overstress = _evaluate_kernel(psi, lam, theta, preferred, *flat)
+    if info[_INFO_HAS_CONTACT] and not info[_INFO_ON_VERTEX]:
+        preferred = int(info[_INFO_SEGMENT])
+    n = psi.size
+    stiff = fields[_ROW_STIFF, :n].copy()  # the section tangents, until a secant replaces them
+    best, since_best = info[_INFO_MERIT], 0
     for _ in range(_MAX_NEWTON):
-        if ev.merit == math.inf:
-            return None
-        if ev.converged:
-            return ev
+        merit = info[_INFO_MERIT]
+        if merit == np.inf:
+            break
+        if info[_INFO_CONVERGED]:
+            return True, psi, lam, fields, info, overstress
         if since_best >= _STALL_ITERATIONS:
-            return None  # stalled: leave it to _initial_stiffness
-        delta = problem.newton_direction(ev, stiff)
-        if delta is None:
-            return None
+            break  # stalled: leave it to _initial_stiffness
+        delta, regular = _newton_direction(fields, info, lam, stiff, *flat[:_ROD_END])
+        if not regular:
+            break
         # Limit the rotation update: the contact search is only valid nearby.
-        step = min(1.0, 0.2 / max(float(np.abs(delta[:-1]).max()), 1e-300))
+        largest = np.abs(delta[:n]).max()
+        scaled = 0.2 / (1e-300 if 1e-300 > largest else largest)
+        step = scaled if scaled < 1.0 else 1.0
         full_step = step
         for _ in range(_MAX_BACKTRACKS):
-            trial = attempt(ev.psi + step * delta[:-1], ev.lam + step * float(delta[-1]))
-            if trial.merit < (1.0 - 1e-4 * step) * ev.merit:
+            trial_psi = psi + step * delta[:n]
+            trial_lam = lam + step * delta[n]
+            trial_fields, trial_info, trial_overstress = _evaluate_kernel(
+                trial_psi, trial_lam, theta, preferred, *flat
+            )
+            if trial_info[_INFO_HAS_CONTACT] and not trial_info[_INFO_ON_VERTEX]:
+                preferred = int(trial_info[_INFO_SEGMENT])
+            if trial_info[_INFO_MERIT] < (1.0 - 1e-4 * step) * merit:
                 break
             step *= 0.5
-        stiff = _secant_kernel(ev.fields, trial.fields, problem.ell)
+        stiff = _secant_kernel(fields, trial_fields, ell)
         if step < full_step:
             # A kink stopped the full step: let fully plastic nodes see that
             # they may unload (their tangent is zero on the loading side).
-            stiff = np.maximum(stiff, _UNLOADING_FLOOR * problem.elastic_stiff)
-        ev = trial
-        if ev.merit < 0.5 * best:
-            best, since_best = ev.merit, 0
+            stiff = np.maximum(stiff, unloading)
+        psi, lam, fields, info, overstress = (
+            trial_psi,
+            trial_lam,
+            trial_fields,
+            trial_info,
+            trial_overstress,
+        )
+        if info[_INFO_MERIT] < 0.5 * best:
+            best, since_best = info[_INFO_MERIT], 0
         else:
             since_best += 1
-    return None
+    return False, psi, lam, fields, info, overstress
 
 
 def _initial_stiffness(
