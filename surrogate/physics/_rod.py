@@ -57,6 +57,7 @@ scalars into ``info`` (the ``_ROW_*`` and ``_INFO_*`` indices);
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -1040,10 +1041,13 @@ def _initial_stiffness(
             return ev
         if iteration % _REFACTOR_EVERY == 0:  # the contact geometry drifts slowly
             try:
-                factors = scipy.linalg.lu_factor(
-                    problem.jacobian(ev, problem.elastic_stiff), check_finite=False
-                )
-            except (np.linalg.LinAlgError, ValueError):
+                with warnings.catch_warnings():
+                    # singular: SciPy only warns, and the solve would not be finite
+                    warnings.simplefilter("error", scipy.linalg.LinAlgWarning)
+                    factors = scipy.linalg.lu_factor(
+                        problem.jacobian(ev, problem.elastic_stiff), check_finite=False
+                    )
+            except (np.linalg.LinAlgError, ValueError, scipy.linalg.LinAlgWarning):
                 return None
         delta = scipy.linalg.lu_solve(factors, -ev.residual, check_finite=False)
         preferred = int(ev.info[_INFO_SEGMENT]) if ev.on_segment else None

@@ -108,3 +108,36 @@ def test_predictor_extrapolates_linear_and_quadratic_paths_exactly(degree):
     assert lam == pytest.approx(target.lam, rel=1e-12)
     if degree == 2:
         assert predictor.quadratic
+
+
+def test_a_singular_initial_stiffness_matrix_fails_the_step_without_a_warning(monkeypatch):
+    """The initial-stiffness fallback on a singular matrix: the step fails (bisection
+    takes over) and nothing reaches the user's stderr (SciPy's ``lu_factor`` only warns
+    there, and a benchmark run printed its LinAlgWarning)."""
+    import warnings
+
+    from surrogate.physics import default_mesh
+    from surrogate.physics._rod import _initial_stiffness, _Problem
+
+    section = CoatingSection(1000.0, 200.0, 0.012, 1.2)
+    problem = _Problem(
+        section,
+        default_mesh(35.0, 15.0),
+        width_mm=25.0,
+        bending_length_mm=15.0,
+        contact_radius_mm=1.6,
+        friction=0.1,
+        tension_n=0.0,
+    )
+    rest = problem.configuration(np.zeros(problem.N), 0.0, section.initial_state(problem.N), 0.0)
+    jacobian = problem.jacobian
+
+    def singular(ev, stiff=None):
+        matrix = jacobian(ev, stiff)
+        matrix[5] = 0.0
+        return matrix
+
+    monkeypatch.setattr(problem, "jacobian", singular)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert _initial_stiffness(problem, rest.psi, 0.0, np.radians(10.0), rest) is None
