@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import tomllib
 from pathlib import Path
 
@@ -227,7 +228,7 @@ THICK = {"thick": 0.15}  # +15 % towards 90° per e-fold of Tcoat at fixed D and
 @pytest.mark.slow
 @pytest.mark.parametrize("case", range(len(TRUTHS)))
 def test_calibration_reaches_the_expensive_solvers_noise_floor_in_few_expensive_runs(
-    distorted_solver, log_runs, case
+    distorted_solver, log_runs, case, caplog
 ):
     """Two bending lengths, noise 0.05 N, curves from the expensive solver: the noise
     floor (RMSE ≤ 1.05 × the truth's own, D and Mp within 5 %), ``converged`` at an
@@ -235,15 +236,28 @@ def test_calibration_reaches_the_expensive_solvers_noise_floor_in_few_expensive_
 
     The expensive curves also change shape with Tcoat at fixed D and Mp (``thick``),
     which the built-in ones hardly do — as CalculiX's coarse mesh against the rod: the
-    correction learns it, and the expensive curves' Tcoat (within 20 %) is found."""
+    correction learns it, and the expensive curves' Tcoat (within 20 %) is found.
+
+    An expensive run takes minutes (a CalculiX diagnosis's confirmation said nothing for
+    half an hour between two rounds of its local phase): each is told as it ends, with
+    its step's count and time; the built-in solver's hundreds of runs are not."""
     truth = TRUTHS[case]
     settings = " ".join(f"{k} = {v}" for k, v in THICK.items())
     path = _calibration_study(log_runs / "cal", BENDING, truth, seed=case, settings=settings)
     floor = _truth_rmse(path, truth, THICK)
     before = _expensive_runs(log_runs)
-    result = surrogate.calibrate(path, progress=False)
+    caplog.set_level(logging.INFO, logger="surrogate")
+    result = surrogate.calibrate(path, progress=True)
     assert result.status == "converged" and result.misfit == "within the noise", result.message
     assert result.rmse_n <= 1.05 * floor
+    told = [r.getMessage() for r in caplog.records if " of this step " in r.getMessage()]
+    assert len(told) == result.solver_calls == _expensive_runs(log_runs) - before
+    line = re.compile(
+        r"\[mf/calibrate/base\] test-distorted run (\d+) of (\d+) of this step finished, "
+        r"\d+ s into it"
+    )
+    counts = [line.fullmatch(text) for text in told]
+    assert all(counts) and all(1 <= int(m[1]) <= int(m[2]) for m in counts if m), told
     (d, mp), (d0, mp0) = coat_section(result.params, 1.2), coat_section(truth, 1.2)
     assert abs(d / d0 - 1) <= 0.05 and abs(mp / mp0 - 1) <= 0.05
     assert abs(result.params["tcoat_mm"] / truth["tcoat_mm"] - 1) <= 0.2

@@ -25,6 +25,7 @@ solver's on whole degrees, interpolated to the measured angles.
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +39,7 @@ from .._pool import imap_unordered
 from ..gp import CurveSurrogate
 from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
+from ..solvers._fidelity import LOW_FIDELITY
 from ._determination import determine
 from ._local import (
     FIRST_ORDER_BOX,
@@ -117,6 +119,9 @@ class SolverRuns:
         self.curves: list[np.ndarray] = []
         self.failures: list[str] = []
         self._seen: set[tuple[str, int]] = set()
+        # told as each run of an external solver ends (minutes a run; a calibration
+        # loop with progress on sets it): the built-in solver's runs are not told
+        self.say: Callable[[str], None] | None = None
 
     def _items(
         self, thetas: np.ndarray, groups: Sequence[int]
@@ -178,12 +183,25 @@ class SolverRuns:
                 todo.append(i)
             else:
                 results[i] = hit
+        started = time.monotonic()
         solved = imap_unordered(solve_inputs, [items[i][2] for i in todo], self.jobs)
-        for j, result in solved:
+        for done, (j, result) in enumerate(solved, 1):
             i = todo[j]
             self.cache.put(keys[i], items[i][2], result)
             results[i] = result
+            self._tell(items[i][2], result, done, len(todo), time.monotonic() - started)
         return results
+
+    def _tell(
+        self, inputs: Mapping[str, Any], result: Mapping[str, Any], done: int, of: int, took: float
+    ) -> None:
+        """Progress of a batch of an external solver's runs (``say``)."""
+        if self.say is None or inputs["solver"] == LOW_FIDELITY:
+            return
+        ended = "finished" if result["status"] == "ok" else f"failed ({result['reason']})"
+        self.say(
+            f"{inputs['solver']} run {done} of {of} of this step {ended}, {took:.0f} s into it"
+        )
 
     @property
     def calls(self) -> int:
@@ -273,6 +291,8 @@ class CalibrationLoop:
         self.verified: list[VerifiedPoint] = []
         self.fits: list[LocalFit] = []
         self.iterations = 0
+        if progress:
+            runs.say = self._say
 
     def _say(self, text: str) -> None:
         if self.progress:
