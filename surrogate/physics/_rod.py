@@ -812,6 +812,8 @@ class _Problem:
         self.elastic_stiff = section.stiffness_nmm * width_mm / self.ell
         if self.spring is not None:
             self.elastic_stiff[0] = self.spring
+        # the floor of a node's tangent after a step the line search shortened (_newton)
+        self.unloading_stiff = _UNLOADING_FLOOR * self.elastic_stiff
         self.rod = _Rod(
             h=h,
             ell=ell,
@@ -944,7 +946,7 @@ def _newton(
         float(lam),
         float(theta),
         problem.ell,
-        _UNLOADING_FLOOR * problem.elastic_stiff,
+        problem.unloading_stiff,
         *problem.loads,
         *problem.rod,
         *problem.section.fibres,
@@ -958,15 +960,23 @@ def _newton(
 
 
 @njit(cache=True)
+def _kept_segment(info, preferred):
+    """The contact segment the next iterate keeps (see :func:`_nearest_point`): this
+    iterate's where its contact point lies inside a segment, else still ``preferred``
+    (−1: none)."""
+    if info[_INFO_HAS_CONTACT] and not info[_INFO_ON_VERTEX]:
+        return int(info[_INFO_SEGMENT])
+    return preferred
+
+
+@njit(cache=True)
 def _newton_kernel(psi, lam, theta, ell, unloading, *flat):
     """:func:`_newton`'s iterations: whether they converged, and the last iterate's
     ``psi``, ``lam``, ``fields``, ``info`` and overstress. ``unloading``: the floor of a
     node's tangent after a step the line search shortened; ``flat`` as
     :func:`_evaluate_kernel`'s."""
-    preferred = -1  # the contact segment to keep (see _nearest_point)
-    fields, info, overstress = _evaluate_kernel(psi, lam, theta, preferred, *flat)
-    if info[_INFO_HAS_CONTACT] and not info[_INFO_ON_VERTEX]:
-        preferred = int(info[_INFO_SEGMENT])
+    fields, info, overstress = _evaluate_kernel(psi, lam, theta, -1, *flat)
+    preferred = _kept_segment(info, -1)
     n = psi.size
     stiff = fields[_ROW_STIFF, :n].copy()  # the section tangents, until a secant replaces them
     best, since_best = info[_INFO_MERIT], 0
@@ -992,8 +1002,7 @@ def _newton_kernel(psi, lam, theta, ell, unloading, *flat):
             trial_fields, trial_info, trial_overstress = _evaluate_kernel(
                 trial_psi, trial_lam, theta, preferred, *flat
             )
-            if trial_info[_INFO_HAS_CONTACT] and not trial_info[_INFO_ON_VERTEX]:
-                preferred = int(trial_info[_INFO_SEGMENT])
+            preferred = _kept_segment(trial_info, preferred)
             if trial_info[_INFO_MERIT] < (1.0 - 1e-4 * step) * merit:
                 break
             step *= 0.5
