@@ -24,6 +24,10 @@ diagnosis on curves CalculiX made, the built-in solver as its prior.
   wall time. Targets: named, ≤ 60 CalculiX runs, RMSE after ≤ 1.5 × noise, ≤ 1 h wall
   on 2 cores.
 
+The machine's cores are shared among the cases run at once (``--jobs``): each case's
+``calibrate``/``diagnose`` gets cores ÷ cases-at-once processes (``jobs=``), so a case
+alone runs its verifications' CalculiX runs side by side.
+
 Every figure is printed with the machine; ``--work DIR`` keeps the study folders (their
 result caches let a second run reuse the CalculiX runs: a cached run still counts as a
 CalculiX run of the calibration it belongs to), each with its ``progress.log``.
@@ -158,8 +162,8 @@ def same_section(coating: dict[str, float], factor: float) -> dict[str, float]:
     return {"ecoat_gpa": d / unit_d, "scoat_gpa": mp / unit_mp, "tcoat_mm": tcoat}
 
 
-def calibration_case(task: tuple[str, Path, int]) -> dict[str, Any]:
-    name, work, seed = task
+def calibration_case(task: tuple[str, Path, int, int]) -> dict[str, Any]:
+    name, work, seed, jobs = task
     truth = CALIBRATIONS[name]
     path = _study(
         work / f"calibration-{name}", TWO_LENGTHS, truth, None, seed=seed, stated_noise=True
@@ -167,7 +171,7 @@ def calibration_case(task: tuple[str, Path, int]) -> dict[str, Any]:
     at_truth = surrogate.compare(path, params=truth, plots=False, progress=False).rmse_n
     start = time.perf_counter()
     with _progress_log(path.parent):
-        result = surrogate.calibrate(path, progress=True)
+        result = surrogate.calibrate(path, jobs=jobs, progress=True)
     seconds = time.perf_counter() - start
     neighbours = [
         surrogate.compare(
@@ -205,13 +209,13 @@ def calibration_case(task: tuple[str, Path, int]) -> dict[str, Any]:
     }
 
 
-def diagnosis_case(task: tuple[str, Path, int]) -> dict[str, Any]:
-    name, work, seed = task
+def diagnosis_case(task: tuple[str, Path, int, int]) -> dict[str, Any]:
+    name, work, seed, jobs = task
     coating, hidden, tests = DIAGNOSES[name]
     path = _study(work / f"diagnosis-{name}", tests, coating, hidden, seed=seed, stated_noise=False)
     start = time.perf_counter()
     with _progress_log(path.parent):
-        result = surrogate.diagnose(path, jobs=1, progress=True)
+        result = surrogate.diagnose(path, jobs=jobs, progress=True)
     seconds = time.perf_counter() - start
     top = result.ranking[0] if result.ranking else None
     mf = result.multi_fidelity or {}
@@ -232,13 +236,13 @@ def diagnosis_case(task: tuple[str, Path, int]) -> dict[str, Any]:
     }
 
 
-def _job(task: tuple[str, str, Path, int]) -> dict[str, Any]:
+def _job(task: tuple[str, str, Path, int, int]) -> dict[str, Any]:
     """One case; a case that fails is a row with its error (the others go on)."""
-    kind, name, work, seed = task
+    kind, name, work, seed, jobs = task
     start = time.perf_counter()
     try:
         case = calibration_case if kind == "calibration" else diagnosis_case
-        return case((name, work, seed))
+        return case((name, work, seed, jobs))
     except surrogate.InputDataError as error:
         return {
             "kind": kind,
@@ -313,7 +317,15 @@ def main() -> None:
     ]
     if not tasks:
         parser.error(f"no case of --only {args.only} is among --cases {args.cases}")
-    print(f"{len(tasks)} cases, {args.jobs} at once; {machine()}; work folder {work}", flush=True)
+    # the machine's cores shared among the cases at once: a case alone gets them all (its
+    # verifications' CalculiX runs side by side)
+    inner = max(1, (os.cpu_count() or 1) // min(args.jobs, len(tasks)))
+    tasks = [(*task, inner) for task in tasks]
+    print(
+        f"{len(tasks)} cases, {args.jobs} at once, {inner} process(es) each; {machine()}; "
+        f"work folder {work}",
+        flush=True,
+    )
     start = time.perf_counter()
     rows = []
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:

@@ -22,8 +22,8 @@ refuses a bare-webbing stiffness (``membrane_bending``); ``fail_above_tcoat_mm``
 it fail where the coat is thicker, as ccx stops short for thick coats, and
 ``retry_above_tcoat_mm`` says of its runs there that they finished after a retry (the
 result's ``retried_after``, as CalculiX's), its curve unchanged. Every run appends
-its input hash to the file named by ``$SURROGATE_TEST_SOLVER_LOG`` (when set), so a test
-counts the expensive runs.
+its input hash and its process id to the file named by ``$SURROGATE_TEST_SOLVER_LOG``
+(when set), so a test counts the expensive runs and sees where they ran.
 """
 
 from __future__ import annotations
@@ -71,7 +71,7 @@ class DistortedSolver(Solver):
         log = os.environ.get(LOG_VARIABLE)
         if log:
             with open(log, "a", encoding="utf-8") as handle:
-                handle.write(f"{input_hash(inputs)}\n")
+                handle.write(f"{input_hash(inputs)} {os.getpid()}\n")
         state = model_state(inputs)
         refused = self.refuses(state)
         if refused is not None:

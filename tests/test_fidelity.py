@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import re
 import tomllib
 from pathlib import Path
@@ -27,9 +28,14 @@ from tests.studies import write_study
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 
 
-def _expensive_runs(folder: Path) -> int:
+def _expensive_log(folder: Path) -> list[list[str]]:
+    """The expensive runs so far, each as [input hash, process id]."""
     log = folder / "expensive.log"
-    return len(log.read_text().split()) if log.exists() else 0
+    return [line.split() for line in log.read_text().splitlines()] if log.exists() else []
+
+
+def _expensive_runs(folder: Path) -> int:
+    return len(_expensive_log(folder))
 
 
 def _paper_study(folder: Path, solver: str) -> Path:
@@ -370,15 +376,18 @@ def test_diagnosis_names_a_hidden_effect_confirming_it_on_the_expensive_solver(
     the corrected built-in model, the leader is confirmed on the expensive solver (its
     RMSE after adding it there within 1.3 × noise, its progress shown under its model's
     name), membrane_bending — which the solver cannot model — is skipped with its reason,
-    and at most 60 expensive runs are spent."""
+    and at most 60 expensive runs are spent, a verification's runs in ``jobs`` processes
+    side by side."""
     truth = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
     hidden = {"tension": {"k_e": 0.006, "k_s": 0.006}}
     path = _calibration_study(log_runs / "diag", DIAGNOSIS_TESTS, truth, hidden=hidden, seed=3)
     data_runs = _expensive_runs(log_runs)
     candidates = ["tension", "anisotropy", "hardening", "membrane_bending"]
     caplog.set_level(logging.INFO, logger="surrogate")
-    result = surrogate.diagnose(path, candidates=candidates)
+    result = surrogate.diagnose(path, candidates=candidates, jobs=2)
     assert result.systematic
+    processes = {pid for _, pid in _expensive_log(log_runs)[data_runs:]}
+    assert len(processes - {str(os.getpid())}) >= 2  # child processes ran them
     confirmation = [
         r.getMessage() for r in caplog.records if "/calibrate/tension]" in r.getMessage()
     ]

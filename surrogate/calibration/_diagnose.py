@@ -41,6 +41,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -158,7 +159,8 @@ def diagnose(
     candidates : sequence of str, optional
         Effects to try (default: every registered effect not in the model).
     jobs : int, optional
-        Processes for the local refits, ≥ 1 (default: the machine's CPUs).
+        Processes for the local refits and, with an external full solver, for the
+        expensive runs of one verification, ≥ 1 (default: the machine's CPUs).
     progress : bool
         Log each step at INFO (logger ``surrogate``; on stderr unless configured).
     """
@@ -167,7 +169,12 @@ def diagnose(
         show_progress()
     spec, data, chosen, noise = load_calibration(study, effects, plugins)
     url = storage or spec.default_storage()
-    fitted, loop = run_calibration(spec, effects=chosen, storage=url, progress=progress)
+    # an external solver's runs of one verification (minutes each) side by side; the
+    # built-in solver's (milliseconds) stay in this process
+    expensive_jobs = (jobs or os.cpu_count() or 1) if spec.low_fidelity else 1
+    fitted, loop = run_calibration(
+        spec, effects=chosen, storage=url, jobs=expensive_jobs, progress=progress
+    )
     problem = CalibrationProblem(spec, data, chosen)
     say = _Say(progress, f"{spec.name}/diagnose")
     correction = _correction(loop, say)
@@ -175,7 +182,14 @@ def diagnose(
     for effect, reason in skipped.items():
         say(f"{effect} skipped: {reason}")
     refits = _Refits(
-        problem, chosen, noise, fitted.params, jobs=jobs, say=say, correction=correction
+        problem,
+        chosen,
+        noise,
+        fitted.params,
+        jobs=jobs,
+        expensive_jobs=expensive_jobs,
+        say=say,
+        correction=correction,
     )
     refits.refit_all(names)
     current = refits.current if correction is None else _verified_refit(problem, loop, noise)
@@ -390,11 +404,13 @@ class _Refits:
         params: dict[str, float],
         *,
         jobs: int | None,
+        expensive_jobs: int = 1,
         say: _Say,
         correction: CurveCorrection | None = None,
     ) -> None:
         self.problem, self.chosen, self.noise, self.params = problem, chosen, noise, params
         self.jobs, self.say, self.correction = jobs, say, correction
+        self.expensive_jobs = expensive_jobs
         self.refits: dict[str | None, _Refit] = {}
         self.names: list[str] = []
         self.used: set[str] = set()
@@ -530,6 +546,7 @@ class _Refits:
         found, loop = run_calibration(
             self.problem.spec,
             effects=(*self.chosen, candidate.effect),
+            jobs=self.expensive_jobs,
             progress=self.say.on,  # 30 expensive runs: labelled by the model confirmed
             record=False,
             correction=CurveCorrection(self.correction.Z, self.correction.D),
