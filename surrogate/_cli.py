@@ -689,7 +689,10 @@ def _add_diagnose(commands: _Subparsers) -> argparse.ArgumentParser:
     _add_model_options(diag)
     _add_storage(diag)
     diag.add_argument(
-        "--jobs", type=int, help="processes for the candidates' refits (default: all CPUs)"
+        "--jobs",
+        type=int,
+        help="processes for the candidates' refits and an external solver's runs of one "
+        "verification (default: all CPUs)",
     )
     _add_json(diag)
     return diag
