@@ -319,10 +319,11 @@ def main() -> None:
         parser.error(f"no case of --only {args.only} is among --cases {args.cases}")
     # the machine's cores shared among the cases at once: a case alone gets them all (its
     # verifications' CalculiX runs side by side)
-    inner = max(1, (os.cpu_count() or 1) // min(args.jobs, len(tasks)))
+    at_once = min(args.jobs, len(tasks))
+    inner = max(1, (os.cpu_count() or 1) // at_once)
     tasks = [(*task, inner) for task in tasks]
     print(
-        f"{len(tasks)} cases, {args.jobs} at once, {inner} process(es) each; {machine()}; "
+        f"{len(tasks)} cases, {at_once} at once, {inner} process(es) each; {machine()}; "
         f"work folder {work}",
         flush=True,
     )
@@ -332,7 +333,7 @@ def main() -> None:
         for future in as_completed([pool.submit(_job, task) for task in tasks]):
             rows.append(future.result())
             _print(rows[-1])
-    print(f"wall time {time.perf_counter() - start:.0f} s, {args.jobs} cases at once")
+    print(f"wall time {time.perf_counter() - start:.0f} s, {at_once} cases at once")
     for row in rows:
         if row["kind"] == "diagnosis" and "error" not in row:
             print(f"  {row['set']}: {row['verdict']}")
