@@ -74,9 +74,11 @@ def imap_unordered(
 ) -> Iterator[tuple[int, R]]:
     """``(index, function(tasks[index]))`` for every task, in the order they finish.
 
-    ``jobs`` = 1 (or one task, or no ``fork``) runs in this process. At most
-    ``2 × jobs`` tasks are submitted ahead, so an interrupt cancels the rest at
-    once; an exception in a task (or here) shuts the pool down without waiting.
+    ``jobs`` = 1 (or one task, or no ``fork``) runs in this process; else at most one
+    process a task (a pool that forks starts all its processes at once: three runs with
+    ``jobs`` = 64 would fork 64). At most ``2 × jobs`` tasks are submitted ahead, so an
+    interrupt cancels the rest at once; an exception in a task (or here) shuts the pool
+    down without waiting.
     """
     check_jobs(jobs)
     if jobs == 1 or len(tasks) <= 1 or not can_fork():
@@ -84,7 +86,9 @@ def imap_unordered(
             yield index, function(task)
         return
     with ProcessPoolExecutor(
-        max_workers=jobs, mp_context=process_context(), initializer=one_blas_thread
+        max_workers=min(jobs, len(tasks)),
+        mp_context=process_context(),
+        initializer=one_blas_thread,
     ) as pool:
         pending: dict[Future[R], int] = {}
         queue = list(range(len(tasks)))

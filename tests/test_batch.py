@@ -1,10 +1,14 @@
 """Batch evaluation: workers, cache, resume, failed runs as rows."""
 
+import multiprocessing
+import os
+
 import numpy as np
 import pandas as pd
 import pytest
 
 from surrogate import PAPER_SPACE, SampleSet, make_design
+from surrogate._pool import imap_unordered
 from surrogate.solvers._batch import evaluate_design
 from tests.conftest import CountingSolve
 
@@ -68,3 +72,17 @@ def test_sample_set_round_trip(tmp_path, design):
     assert curves.shape == (6, 91)
     assert again.space == PAPER_SPACE
     assert again.meta["solver"] == "builtin" and again.meta["rig"]["width_mm"] == 38.0
+
+
+def _pid(_: int) -> int:
+    return os.getpid()
+
+
+def test_a_pool_forks_no_more_processes_than_it_has_tasks():
+    """A pool that forks starts every process at once: two tasks with ``jobs`` = 8 (a
+    diagnosis's default, every CPU, on a verification's two runs) fork two, not eight."""
+    seen = []
+    for _, pid in imap_unordered(_pid, [0, 1], jobs=8):
+        seen.append(pid)
+        assert len(multiprocessing.active_children()) <= 2
+    assert len(seen) == 2 and os.getpid() not in seen
