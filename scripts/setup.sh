@@ -12,8 +12,8 @@ fi
 .venv/bin/python -m pip install --quiet --disable-pip-version-check -e ".[dev]"
 # The built-in solver's kernels are compiled by numba on their first call and cached beside
 # the source (surrogate/physics/__pycache__): compile them here, once, rather than in
-# every process of the first run (each pytest process of the suite compiled them itself:
-# 27 s of CPU on the 2-core AMD EPYC, here). A second setup finds them cached.
+# the first processes of the first run (the suite's pytest processes each compiled them:
+# 27 s of CPU a compile on the loaded 2-core AMD EPYC). A second setup finds them cached.
 echo "setup: compiling the built-in solver's kernels (numba; cached after the first time)"
 .venv/bin/python -c "
 import surrogate
