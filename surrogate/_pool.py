@@ -26,6 +26,7 @@ from ._errors import InputDataError
 __all__ = [
     "can_fork",
     "check_jobs",
+    "cpu_jobs",
     "imap_unordered",
     "one_blas_thread",
     "process_context",
@@ -62,11 +63,16 @@ def check_jobs(jobs: Any, *, minimum: int = 1, every_cpu: bool = False) -> Any:
     return jobs
 
 
-def worker_count(jobs: int | None, tasks: int) -> int:
-    """Processes for ``tasks`` tasks: ``jobs`` (all cores when None), never more than tasks."""
+def cpu_jobs(jobs: int | None) -> int:
+    """``jobs``, or every core when None."""
     if jobs is not None:
         check_jobs(jobs)
-    return max(1, min(jobs or os.cpu_count() or 1, tasks))
+    return jobs or os.cpu_count() or 1
+
+
+def worker_count(jobs: int | None, tasks: int) -> int:
+    """Processes for ``tasks`` tasks: ``jobs`` (all cores when None), never more than tasks."""
+    return max(1, min(cpu_jobs(jobs), tasks))
 
 
 def imap_unordered(

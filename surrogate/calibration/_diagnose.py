@@ -41,7 +41,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -52,7 +51,7 @@ import optuna
 
 from .._errors import InputDataError
 from .._log import show_progress
-from .._pool import check_jobs, imap_unordered, worker_count
+from .._pool import check_jobs, cpu_jobs, imap_unordered, worker_count
 from ..effects import available_effects, get_effect
 from ..solvers import get_solver
 from ..solvers._fidelity import fidelity_record
@@ -171,7 +170,7 @@ def diagnose(
     url = storage or spec.default_storage()
     # an external solver's runs of one verification (minutes each) side by side; the
     # built-in solver's (milliseconds) stay in this process
-    expensive_jobs = (jobs or os.cpu_count() or 1) if spec.low_fidelity else 1
+    expensive_jobs = cpu_jobs(jobs) if spec.low_fidelity else 1
     fitted, loop = run_calibration(
         spec, effects=chosen, storage=url, jobs=expensive_jobs, progress=progress
     )
