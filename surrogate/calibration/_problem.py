@@ -14,7 +14,7 @@ the checks of the commands' options.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -148,7 +148,7 @@ class CalibrationProblem:
         """Coating point and effects mapping of a parameter vector."""
         return self._split([theta[name] for name in self.space.names])
 
-    def _split(self, values: Sequence[float]) -> tuple[dict[str, float], dict[str, Any]]:
+    def _split(self, values: Iterable[float]) -> tuple[dict[str, float], dict[str, Any]]:
         """:meth:`split` of the values in the space's order (the search's hot path: the
         names are not looked up again for each of its ~10⁵ model states)."""
         coating: dict[str, float] = {}
