@@ -128,3 +128,24 @@ def test_whole_paper_range_converges():
     for ecoat, scoat, tcoat in np.exp(low + unit * (high - low)):
         curve = surrogate.simulate(ecoat, scoat, tcoat)
         assert np.all(np.isfinite(curve.force_n)) and np.all(curve.force_n[1:] > 0)
+
+
+def test_a_process_that_never_solves_does_not_load_the_compiled_rod():
+    """numba (0.3–0.7 s an interpreter) loads with the first solve, not with
+    ``import surrogate``, the CLI, the model state or an external solver's adapter:
+    ``surrogate --help`` took 1.2 s, 0.4 s without it."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, surrogate, surrogate._cli, surrogate.solvers, surrogate.calibration._problem\n"
+        "from surrogate.solvers import model_state\n"
+        "print('numba' in sys.modules)\n"
+        "curve = surrogate.simulate(1.0, 0.2, 0.012)\n"
+        "print('numba' in sys.modules, round(curve.f60_n, 6))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    before, after = done.stdout.splitlines()
+    assert before == "False"
+    expected = round(surrogate.simulate(1.0, 0.2, 0.012).f60_n, 6)
+    assert after == f"True {expected}"

@@ -1,11 +1,26 @@
-"""The built-in full solver: pure numerics, arrays in, frozen records out."""
+"""The built-in full solver: pure numerics, arrays in, frozen records out.
 
-from ._coating import CoatingSection, bending_stiffness, plastic_moment
+The rod and the section's moment–curvature law (:mod:`._rod`, :mod:`._coating`) load
+on first use: their kernels are compiled with numba, whose import (0.3–0.7 s) a
+process that never solves — ``surrogate --help``, a refused input, a worker of an
+external solver — does not pay.
+"""
+
+from .._lazy import lazy_attributes
 from ._features import F60_ANGLE_DEG, CurveFeatures, curve_features
-from ._rod import RodSolution, default_mesh, solve_cantilever, solve_rod, uniform_mesh
+from ._section import bending_stiffness, plastic_moment
 
 SOLVER_VERSION = "rod-1"
 """Bump whenever a change to the solver changes its results (it keys the cache)."""
+
+_LAZY = {
+    "CoatingSection": "._coating",
+    "RodSolution": "._rod",
+    "default_mesh": "._rod",
+    "solve_cantilever": "._rod",
+    "solve_rod": "._rod",
+    "uniform_mesh": "._rod",
+}
 
 __all__ = [
     "F60_ANGLE_DEG",
@@ -21,3 +36,5 @@ __all__ = [
     "solve_rod",
     "uniform_mesh",
 ]
+
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, __all__)

@@ -9,22 +9,19 @@ solver reports).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from .. import physics
 from ..effects import ModelState
-from ..physics import (
-    SOLVER_VERSION,
-    CoatingSection,
-    RodSolution,
-    default_mesh,
-    solve_rod,
-    uniform_mesh,
-)
+from ..physics import SOLVER_VERSION
 from ..study import Rig
 from ._base import Solver, guarded, ok_result, register_solver
 from ._state import model_state
+
+if TYPE_CHECKING:  # the rod loads with the first solve (numba): surrogate.physics
+    from ..physics import CoatingSection, RodSolution
 
 __all__ = ["BuiltinSolver", "coating_section", "rod_mesh", "solve_state"]
 
@@ -33,7 +30,7 @@ def coating_section(state: ModelState) -> CoatingSection:
     """The moment–curvature law of the coated strip of ``state`` (hardening and the
     extra bending stiffness of the effects included)."""
     ratio = state.hardening_ratio
-    return CoatingSection(
+    return physics.CoatingSection(
         state.ecoat_mpa,
         state.scoat_mpa,
         state.tcoat_mm,
@@ -46,8 +43,8 @@ def coating_section(state: ModelState) -> CoatingSection:
 def rod_mesh(rig: Rig) -> np.ndarray:
     """Segment lengths of the free strip: graded by default, uniform at ``element_size_mm``."""
     if rig.element_size_mm is None:
-        return default_mesh(rig.free_length_mm, rig.bending_length_mm)
-    return uniform_mesh(rig.free_length_mm, rig.element_size_mm)
+        return physics.default_mesh(rig.free_length_mm, rig.bending_length_mm)
+    return physics.uniform_mesh(rig.free_length_mm, rig.element_size_mm)
 
 
 def solve_state(state: ModelState) -> RodSolution:
@@ -60,7 +57,7 @@ def solve_state(state: ModelState) -> RodSolution:
         names the angle).
     """
     rig = state.rig
-    return solve_rod(
+    return physics.solve_rod(
         coating_section(state),
         np.arange(0.0, np.floor(rig.max_angle_deg) + 1.0),
         segment_lengths_mm=rod_mesh(rig),
