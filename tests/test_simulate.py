@@ -1,5 +1,8 @@
 """The public ``simulate`` API: the paper's physics observations, inputs, failures."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -134,9 +137,6 @@ def test_a_process_that_never_solves_does_not_load_the_compiled_rod():
     """numba (0.3–0.7 s an interpreter) loads with the first solve, not with
     ``import surrogate``, the CLI, the model state or an external solver's adapter:
     ``surrogate --help`` took 1.2 s, 0.4 s without it."""
-    import subprocess
-    import sys
-
     code = (
         "import sys, surrogate, surrogate._cli, surrogate.solvers, surrogate.calibration._problem\n"
         "from surrogate.solvers import model_state\n"

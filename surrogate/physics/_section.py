@@ -2,8 +2,7 @@
 
 Plain arithmetic, kept out of :mod:`._coating` (whose return mapping numba compiles) so
 that the model state, the calibration's coordinates and the CLI use them without
-loading numba. A pool whose parent never solved loads numba in each child that does
-(about 0.4 s a child) instead of once before the fork.
+loading numba.
 """
 
 from __future__ import annotations
