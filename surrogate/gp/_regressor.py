@@ -149,22 +149,45 @@ def _kernel_matrix(
     K[np.diag_indices(n)] += noise
     if not eval_gradient:
         return K, None
-    if n_length > 1:  # anisotropic
-        D = (X[:, np.newaxis, :] - X[np.newaxis, :, :]) ** 2 / (length_scale**2)
+    # The gradient by length scale: scikit-learn's element-wise operations in its order,
+    # on one contiguous n × n plane a length scale instead of its n × n × p array (on
+    # hundreds of runs several times faster; the same numbers).
+    if n_length > 1:  # anisotropic: (X_ik − X_jk)² / ℓ_k²
+        planes = np.empty((n_length, n, n))
+        for k in range(n_length):
+            np.subtract(X[:, k, np.newaxis], X[np.newaxis, :, k], out=planes[k])
+        np.square(planes, out=planes)
+        planes /= (length_scale**2)[:, np.newaxis, np.newaxis]
+        D_sum = _sum_over_length_scales(planes)
     else:
-        D = squareform(dists**2)[:, :, np.newaxis]
+        D_sum = squareform(dists**2)
+        planes = D_sum[np.newaxis].copy()
     if nu == 1.5:
-        M_gradient = 3 * D * np.exp(-np.sqrt(3 * D.sum(-1)))[..., np.newaxis]
+        planes *= 3
+        planes *= np.exp(-np.sqrt(3 * D_sum))
     else:
-        tmp = np.sqrt(5 * D.sum(-1))[..., np.newaxis]
-        M_gradient = 5.0 / 3.0 * D * (tmp + 1) * np.exp(-tmp)
-    if n_length == 1:
-        M_gradient = M_gradient[:, :].sum(-1)[:, :, np.newaxis]
+        tmp = np.sqrt(5 * D_sum)
+        planes *= 5.0 / 3.0
+        planes *= tmp + 1
+        planes *= np.exp(-tmp)
     K_gradient = np.zeros((n, n, len(theta)))
     K_gradient[:, :, 0] = CM
-    K_gradient[:, :, 1:-1] = M_gradient * constant
+    for k, plane in enumerate(planes):
+        np.multiply(plane, constant, out=K_gradient[:, :, 1 + k])
     K_gradient[np.arange(n), np.arange(n), -1] = noise
     return K, K_gradient
+
+
+def _sum_over_length_scales(planes: np.ndarray) -> np.ndarray:
+    """``D.sum(-1)`` of scikit-learn's n × n × p array ``D`` whose planes are ``planes``:
+    NumPy adds a contiguous last axis of fewer than 8 in order (``tests/gp``'s
+    dimensions check it), a longer one pairwise, which only ``D`` itself repeats."""
+    if len(planes) >= 8:
+        return np.ascontiguousarray(np.moveaxis(planes, 0, -1)).sum(-1)
+    total = planes[0].copy()
+    for plane in planes[1:]:
+        total += plane
+    return total
 
 
 def _matern(dists: np.ndarray, nu: float) -> np.ndarray:

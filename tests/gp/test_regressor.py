@@ -25,7 +25,7 @@ def _data(rng, n, d, duplicate):
     return X, y
 
 
-CASES = [(nu, d, n) for nu in (1.5, 2.5) for d in (1, 2, 4, 6) for n in (3, 17, 60)]
+CASES = [(nu, d, n) for nu in (1.5, 2.5) for d in (1, 2, 4, 7, 9) for n in (3, 17, 60)]
 
 
 @pytest.mark.parametrize(("nu", "d", "n"), CASES)
