@@ -6,7 +6,7 @@ import io
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -14,7 +14,6 @@ import pandas as pd
 from .._errors import InputDataError
 from .._io import atomic_write_text
 from ..effects import check_effects
-from ..gp import CoatingSurrogate
 from ..solvers._batch import evaluate_design
 from ..study._rig import Rig
 from ..study._samples import SampleSet, read_points
@@ -22,6 +21,9 @@ from ..study._space import PAPER_SPACE, ParameterSpace
 from ..study._spec import StudySpec, load_study
 from ._doe import make_design
 from ._objective import refuse_model_effects
+
+if TYPE_CHECKING:  # the GP (scikit-learn) loads with fit and predict, not with doe
+    from ..gp import CoatingSurrogate
 
 __all__ = ["DoeResult", "FitResult", "PredictResult", "doe", "fit", "fit_surrogate", "predict"]
 
@@ -174,6 +176,8 @@ def fit_surrogate(
     if with_curves and len(samples.curves):
         angles, curves = samples.curve_matrix(ok["run_id"].to_numpy())
     max_angle = float(angles[-1]) if angles is not None else 90.0
+    from ..gp import CoatingSurrogate
+
     return CoatingSurrogate(samples.space, seed=seed, max_angle_deg=max_angle).fit(
         X,
         ok["f60_n"].to_numpy(dtype=float),
@@ -206,6 +210,8 @@ def predict(
     out: str | Path | None = None,
 ) -> PredictResult:
     """Predict F60 and θsat (with standard deviations) at the points."""
+    from ..gp import CoatingSurrogate
+
     surrogate = model if isinstance(model, CoatingSurrogate) else CoatingSurrogate.load(model)
     names = surrogate.space.names
     table = points.copy() if isinstance(points, pd.DataFrame) else read_points(points, names)

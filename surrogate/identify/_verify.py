@@ -26,11 +26,10 @@ import logging
 import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import optuna
-import pandas as pd
 from optuna.trial import FrozenTrial, TrialState
 
 from .._errors import InputDataError
@@ -39,9 +38,11 @@ from ..solvers._batch import solve_inputs, solver_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..storage._optuna import quiet_optuna, suggest
 from ..storage._storage import MAX_RETRY, open_storage, storage_errors
-from ..study._samples import SampleSet
 from ..study._spec import StudySpec, Targets
 from ._objective import constraint_values, is_feasible, meets_target, relative_misfit
+
+if TYPE_CHECKING:  # pandas loads with the surrogate's training set, not in a worker
+    from ..study._samples import SampleSet
 
 __all__ = [
     "METRIC",
@@ -522,6 +523,10 @@ class Verifier:
 
     def sample_set(self) -> SampleSet:
         """The verified runs as the surrogate's training set."""
+        import pandas as pd
+
+        from ..study._samples import SampleSet
+
         rows = [r for r in self.records.values() if r.ok]
         if len(rows) < 3:
             raise InputDataError(
