@@ -112,8 +112,9 @@ def test_predictor_extrapolates_linear_and_quadratic_paths_exactly(degree):
 
 def test_a_singular_initial_stiffness_matrix_fails_the_step_without_a_warning(monkeypatch):
     """The initial-stiffness fallback on a singular matrix: the step fails (bisection
-    takes over) and nothing reaches the user's stderr (SciPy's ``lu_factor`` only warns
-    there, and a benchmark run printed its LinAlgWarning)."""
+    takes over) and nothing reaches the user's stderr (SciPy's ``lu_factor``, which the
+    fallback called before it called LAPACK's ``getrf`` itself, only warned there, and a
+    benchmark run printed its LinAlgWarning)."""
     import warnings
 
     from surrogate.physics import default_mesh
