@@ -32,7 +32,8 @@ from benchmarks._machine import machine  # noqa: E402
 from surrogate.gp._curves import _kernel  # noqa: E402
 from surrogate.gp._regressor import Regressor  # noqa: E402
 
-SIZES = ((10, 4), (20, 4), (40, 5), (80, 5))
+# runs × features; 120 and 230 runs: a diagnosis's refits on a corrected model (test_fidelity)
+SIZES = ((10, 4), (20, 4), (40, 5), (80, 5), (120, 5), (230, 5))
 
 
 def _timed(make, X, y, Z, repeats):
