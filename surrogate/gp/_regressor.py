@@ -20,11 +20,12 @@ kernel, or call, goes to scikit-learn's implementation unchanged.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
 from scipy.linalg.lapack import dpotrf, dpotrs
-from scipy.spatial.distance import cdist, pdist, squareform
+from scipy.spatial.distance import cdist, pdist
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import (
     ConstantKernel,
@@ -104,7 +105,7 @@ class Regressor(GaussianProcessRegressor):
             return super().log_marginal_likelihood(theta, eval_gradient, clone_kernel)
         theta = np.asarray(theta)
         K, K_gradient = _kernel_matrix(self.kernel_.k1.k2.nu, self.X_train_, theta, eval_gradient)
-        K[np.diag_indices_from(K)] += self.alpha
+        K.flat[:: K.shape[0] + 1] += self.alpha  # the diagonal, as scikit-learn's index
         L, info = dpotrf(K, lower=1, clean=1)  # scipy.linalg.cholesky's LAPACK call
         if info > 0:
             return (-np.inf, np.zeros_like(theta)) if eval_gradient else -np.inf
@@ -142,11 +143,11 @@ def _kernel_matrix(
     X = np.atleast_2d(X)
     n = X.shape[0]
     dists = pdist(X / length_scale, metric="euclidean")
-    M = squareform(_matern(dists, nu))
-    np.fill_diagonal(M, 1)
+    M = _square(_matern(dists, nu), n)
+    M.flat[:: n + 1] = 1  # fill_diagonal
     CM = M * constant
     K = CM.copy()
-    K[np.diag_indices(n)] += noise
+    K.flat[:: n + 1] += noise
     if not eval_gradient:
         return K, None
     # The gradient by length scale: scikit-learn's element-wise operations in its order,
@@ -160,7 +161,7 @@ def _kernel_matrix(
         planes /= (length_scale**2)[:, np.newaxis, np.newaxis]
         D_sum = _sum_over_length_scales(planes)
     else:
-        D_sum = squareform(dists**2)
+        D_sum = _square(dists**2, n)
         planes = D_sum[np.newaxis].copy()
     if nu == 1.5:
         planes *= 3
@@ -176,6 +177,22 @@ def _kernel_matrix(
         np.multiply(plane, constant, out=K_gradient[:, :, 1 + k])
     K_gradient[np.arange(n), np.arange(n), -1] = noise
     return K, K_gradient
+
+
+def _square(condensed: np.ndarray, n: int) -> np.ndarray:
+    """SciPy's ``squareform`` of a condensed distance vector (zero diagonal), without its
+    per-call checks: a likelihood evaluation on tens of runs is mostly such overhead."""
+    upper = _upper_triangle(n)
+    square = np.zeros((n, n))
+    square[upper] = condensed
+    square.T[upper] = condensed
+    return square
+
+
+@functools.lru_cache(maxsize=64)
+def _upper_triangle(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n, 1)``, in ``pdist``'s order, kept for the next evaluation."""
+    return np.triu_indices(n, 1)
 
 
 def _sum_over_length_scales(planes: np.ndarray) -> np.ndarray:
