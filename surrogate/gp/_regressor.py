@@ -9,13 +9,15 @@ outweighed the arithmetic on the product's tens of runs (``benchmarks/gp_fit.py`
 fits 1.3–2.4 × and posterior means of a search batch 4.4–7 × faster, 10–80 runs).
 
 :class:`Regressor` evaluates the likelihood of that one kernel from ``theta``
-directly, with the same NumPy and SciPy operations in the same order as
-scikit-learn 1.9 (``GaussianProcessRegressor.log_marginal_likelihood`` and the
-kernels' ``__call__``), so the value and its gradient are the same numbers, bit for
-bit (``tests/gp/test_regressor.py`` checks this against scikit-learn's own on random
-kernels and data). Where scikit-learn's would set the kernel's ``theta`` as a side
-effect, only inside ``fit``'s search is that skipped (its end sets it); any other
-kernel, or call, goes to scikit-learn's implementation unchanged.
+directly, with the same arithmetic as scikit-learn 1.9
+(``GaussianProcessRegressor.log_marginal_likelihood`` and the kernels' ``__call__``):
+each number is computed by the same operations in the same order, though the
+gradient's arrays are laid out a length scale at a time and SciPy's ``squareform``
+is done by hand, so the value and its gradient are the same numbers, bit for bit
+(``tests/gp/test_regressor.py`` checks this against scikit-learn's own on random
+kernels and data, with 1 to 9 features). Where scikit-learn's would set the kernel's
+``theta`` as a side effect, only inside ``fit``'s search is that skipped (its end sets
+it); any other kernel, or call, goes to scikit-learn's implementation unchanged.
 """
 
 from __future__ import annotations
