@@ -12,22 +12,21 @@ fits 1.3–2.4 × and posterior means of a search batch 4.4–7 × faster, 10–
 directly, with the same arithmetic as scikit-learn 1.9
 (``GaussianProcessRegressor.log_marginal_likelihood`` and the kernels' ``__call__``):
 each number is computed by the same operations in the same order, though the
-gradient's arrays are laid out a length scale at a time and SciPy's ``squareform``
-is done by hand, so the value and its gradient are the same numbers, bit for bit
-(``tests/gp/test_regressor.py`` checks this against scikit-learn's own on random
-kernels and data, with 1 to 9 features). Where scikit-learn's would set the kernel's
-``theta`` as a side effect, only inside ``fit``'s search is that skipped (its end sets
-it); any other kernel, or call, goes to scikit-learn's implementation unchanged.
+gradient's arrays are laid out a length scale at a time, so the value and its
+gradient are the same numbers, bit for bit (``tests/gp/test_regressor.py`` checks
+this against scikit-learn's own on random kernels and data, with 1 to 9 features).
+Where scikit-learn's would set the kernel's ``theta`` as a side effect, only inside
+``fit``'s search is that skipped (its end sets it); any other kernel, or call, goes
+to scikit-learn's implementation unchanged.
 """
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
 from scipy.linalg.lapack import dpotrf, dpotrs
-from scipy.spatial.distance import cdist, pdist
+from scipy.spatial.distance import cdist, pdist, squareform
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import (
     ConstantKernel,
@@ -145,7 +144,7 @@ def _kernel_matrix(
     X = np.atleast_2d(X)
     n = X.shape[0]
     dists = pdist(X / length_scale, metric="euclidean")
-    M = _square(_matern(dists, nu), n)
+    M = squareform(_matern(dists, nu))
     M.flat[:: n + 1] = 1  # fill_diagonal
     CM = M * constant
     K = CM.copy()
@@ -163,7 +162,7 @@ def _kernel_matrix(
         planes /= (length_scale**2)[:, np.newaxis, np.newaxis]
         D_sum = _sum_over_length_scales(planes)
     else:
-        D_sum = _square(dists**2, n)
+        D_sum = squareform(dists**2)
         planes = D_sum[np.newaxis].copy()
     if nu == 1.5:
         planes *= 3
@@ -179,22 +178,6 @@ def _kernel_matrix(
         np.multiply(plane, constant, out=K_gradient[:, :, 1 + k])
     K_gradient[np.arange(n), np.arange(n), -1] = noise
     return K, K_gradient
-
-
-def _square(condensed: np.ndarray, n: int) -> np.ndarray:
-    """SciPy's ``squareform`` of a condensed distance vector (zero diagonal), without its
-    per-call checks: a likelihood evaluation on tens of runs is mostly such overhead."""
-    upper = _upper_triangle(n)
-    square = np.zeros((n, n))
-    square[upper] = condensed
-    square.T[upper] = condensed
-    return square
-
-
-@functools.lru_cache(maxsize=64)
-def _upper_triangle(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``np.triu_indices(n, 1)``, in ``pdist``'s order, kept for the next evaluation."""
-    return np.triu_indices(n, 1)
 
 
 def _sum_over_length_scales(planes: np.ndarray) -> np.ndarray:
