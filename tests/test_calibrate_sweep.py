@@ -86,7 +86,17 @@ def test_a_surrogate_that_has_not_learned_the_space_does_not_end_the_global_phas
     after 16 runs, and the local phase from its best point (2.3 N) stopped in a local
     optimum at 1.11 N, 21.5 × the truth's RMSE, "converged" with a systematic misfit.
     A run the surrogate missed by more than half taught it a region it had not
-    learned: the search goes on, and finds the truth's basin."""
+    learned: the search goes on, and finds the truth's basin.
+
+    The path is chaotic, and another BLAS may take any of them: this data with its forces
+    moved by 1e-12 (relative), 100 variants on the default budget of 200 runs: 95
+    ``converged`` within the noise at 0.990–0.992 × the truth's RMSE; five spent the
+    budget, three within the noise at 0.991–0.996 ×, one at 1.053 × and one at 1.264 ×
+    (its local phase's first fit still walking the flat D–Mp valley towards Ecoat's
+    lower bound). Those five again with 300 runs: each within the noise at 0.990–0.994
+    ×, three ``converged``, two spending the budget on the certificate at that bound,
+    which the result says. The test gives the calibration 300 runs and asserts what
+    held on every variant (README, "Calibration")."""
     truth = {"ecoat_gpa": 0.8, "scoat_gpa": 0.1, "tcoat_mm": 0.015}
     hidden = {"membrane_bending": {"d0_nmm": 3.0}}
     table = synthetic_measurements(
@@ -94,7 +104,9 @@ def test_a_surrogate_that_has_not_learned_the_space_does_not_end_the_global_phas
     )
     study = '[study]\nname = "membrane"\n[measurements]\nfile = "tests.csv"\n'
     path = write_study(tmp_path, table, study, ranges=True)  # the diagnosis benchmark's ranges
-    result = surrogate.calibrate(path, effects=["membrane_bending"], progress=False)
+    result = surrogate.calibrate(
+        path, effects=["membrane_bending"], max_solver_calls=300, progress=False
+    )
     at_truth = surrogate.compare(
         path,
         params={**truth, "membrane_bending.d0_nmm": 3.0},
@@ -103,9 +115,13 @@ def test_a_surrogate_that_has_not_learned_the_space_does_not_end_the_global_phas
         progress=False,
     ).rmse_n
     assert result.rmse_n <= 1.05 * at_truth, result.message
-    assert result.status == "converged" and result.misfit == "within the noise"
-    low, high = result.determination["intervals"]["membrane_bending.d0_nmm"]
-    assert low < 3.0 < high
+    assert result.misfit == "within the noise", result.message
+    if result.status == "converged":
+        low, high = result.determination["intervals"]["membrane_bending.d0_nmm"]
+        assert low < 3.0 < high
+    else:  # the truth's basin found, its certificate not within the budget: said so
+        assert result.status == "budget_exhausted" and "raise --budget" in result.message
+        assert result.determination is None
 
 
 def test_a_budget_too_small_says_budget_exhausted_and_claims_nothing(tmp_path):
