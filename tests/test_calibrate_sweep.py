@@ -93,10 +93,13 @@ def test_a_surrogate_that_has_not_learned_the_space_does_not_end_the_global_phas
     ``converged`` within the noise at 0.990–0.992 × the truth's RMSE; five spent the
     budget, three within the noise at 0.991–0.996 ×, one at 1.053 × and one at 1.264 ×
     (its local phase's first fit still walking the flat D–Mp valley towards Ecoat's
-    lower bound). Those five again with 300 runs: each within the noise at 0.990–0.994
-    ×, three ``converged``, two spending the budget on the certificate at that bound,
-    which the result says. The test gives the calibration 300 runs and asserts what
-    held on every variant (README, "Calibration")."""
+    lower bound). The same 100 with 300 runs (the global phase then has 150): 98
+    ``converged`` within the noise at 0.990–0.992 ×, the truth's d0 inside the stated
+    interval each time, in 70–244 runs (median 104); two without the certificate at
+    that bound, within the noise at 0.991 and 0.994 × (one spent the 300 runs, one
+    stopped at 236 after four rounds whose Jacobian was not trusted), which the result
+    says. The test gives the calibration 300 runs and asserts what held on every
+    variant (README, "Measurements, calibration and compare")."""
     truth = {"ecoat_gpa": 0.8, "scoat_gpa": 0.1, "tcoat_mm": 0.015}
     hidden = {"membrane_bending": {"d0_nmm": 3.0}}
     table = synthetic_measurements(
@@ -119,9 +122,9 @@ def test_a_surrogate_that_has_not_learned_the_space_does_not_end_the_global_phas
     if result.status == "converged":
         low, high = result.determination["intervals"]["membrane_bending.d0_nmm"]
         assert low < 3.0 < high
-    else:  # the truth's basin found, its certificate not within the budget: said so
-        assert result.status == "budget_exhausted" and "raise --budget" in result.message
-        assert result.determination is None
+    else:  # the truth's basin found, not its certificate: said so
+        assert result.status == "budget_exhausted" and result.determination is None
+        assert "not at a verified local optimum" in result.message
 
 
 def test_a_budget_too_small_says_budget_exhausted_and_claims_nothing(tmp_path):
