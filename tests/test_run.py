@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import optuna
 import pytest
 
@@ -125,6 +126,23 @@ def test_infeasible_target_ends_budget_exhausted_with_an_explanation(study_file)
     assert result.solver_calls == 10
     assert "out of reach" in result.message and "500" in result.message
     assert result.verified is not None  # the best verified point is still reported
+
+
+def test_a_search_with_nothing_new_to_verify_ends_stalled_not_budget_exhausted(
+    study_file, monkeypatch
+):
+    """The loop stops with runs left where the search proposes no point it has not
+    verified (scripted here after the initial design): the status says the budget was not
+    the limit, not that it was spent."""
+    monkeypatch.setattr(
+        "surrogate.identify._loop._propose", lambda *args, n, **kwargs: np.empty((0, 3))
+    )
+    result = run(study_file, progress=False, target=500.0, budget=10)
+    assert result.status == "stalled", result.message
+    assert result.solver_calls < 10 and result.verified is not None
+    assert f"stalled after {result.solver_calls} of 10 runs" in result.message
+    assert "a larger budget would not have been spent" in result.message
+    assert "budget exhausted" not in result.message
 
 
 def test_cli_run_json(study_file):

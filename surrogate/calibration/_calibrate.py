@@ -64,8 +64,11 @@ class CalibrationResult:
     this calibration used (a run already in the result cache is not repeated).
 
     ``status`` is ``converged`` only when the local phase's first-order test held
-    at ``params`` (a verified point; see :mod:`surrogate.calibration._local`), else
-    ``budget_exhausted`` (``params`` is then the best verified point).
+    at ``params`` (a verified point; see :mod:`surrogate.calibration._local`); else
+    ``budget_exhausted`` where the budget is what stopped it (no further verification
+    fitted in it), or ``stalled`` where the local phase stopped with runs left (rounds
+    whose test found nothing better: a larger budget would not have been spent).
+    ``params`` is then the best verified point.
     ``predicted_gain`` is what that test measured: the relative RMSE decrease the
     Gauss–Newton model still promises within ±5 % of each range (``None`` unless
     ``converged``). With
@@ -76,7 +79,7 @@ class CalibrationResult:
     bending stiffness ``bending_stiffness_nmm`` [N·mm per unit width], the plastic
     moment ``plastic_moment_n`` [N·mm/mm = N] and each parameter, the free
     parameters, those held at a bound). ``determination`` is ``None`` unless
-    ``converged``. With ``budget_exhausted``, ``misfit`` is ``"within the noise"``
+    ``converged``. Unconverged, ``misfit`` is ``"within the noise"``
     where the best verified point already passes the F-test (a local optimum would fit
     at least as well: the model is not shown to miss anything), else ``None``: a
     misfit there may be the search's, not the model's.
@@ -251,6 +254,7 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
         determination = determination_at(problem, fit).to_json()
     elif (at_best := loop.p_value_at(best)) >= SIGNIFICANCE:  # an optimum fits as well
         p_value, misfit = at_best, "within the noise"
+    spent = loop.budget_spent()
     result = CalibrationResult(
         params=dict(zip(problem.space.names, map(float, best.theta), strict=True)),
         rmse_n=float(best.rmse),
@@ -258,7 +262,7 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
         solver_calls=runs.calls,
         effects=list(effects),
         rmse_per_test_n=best.per_test,
-        status="converged" if converged else "budget_exhausted",
+        status="converged" if converged else "budget_exhausted" if spent else "stalled",
         predicted_gain=fit.predicted_gain if fit is not None and converged else None,
         misfit=misfit,
         misfit_p_value=p_value,
@@ -268,8 +272,7 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
         storage=url,
         message="",
     )
-    spent = loop.budget_spent()
-    message = _message(problem, result, fit, budget_spent=spent)
+    message = _message(problem, result, fit)
     retried, sentence = _retried(loop, best)
     message += sentence
     multi = _multi_fidelity(loop, best)
@@ -341,13 +344,11 @@ def _message(
     problem: CalibrationProblem,
     result: CalibrationResult,
     fit: LocalFit | None,
-    *,
-    budget_spent: bool,
 ) -> str:
     """The calibration's one message. Unconverged: the local fit's reason, and "raise
-    --budget" only where the budget is what stopped it (``budget_spent``: no further
-    verification fits); a fit that stopped with runs left (four rounds whose test found
-    nothing better) says that more runs would not have been spent there."""
+    --budget" only where the budget is what stopped it (``budget_exhausted``); a fit
+    that stopped with runs left (``stalled``: four rounds whose test found nothing
+    better) says that more runs would not have been spent there."""
     rmse, noise = result.rmse_n, result.noise_n
     text = (
         f"{model_label(result.effects)}: RMSE {rmse:.4g} N over {problem.n_points} points of "
@@ -358,7 +359,7 @@ def _message(
     if why is not None:
         hint = (
             "raise --budget"
-            if budget_spent
+            if result.status == "budget_exhausted"
             else "the budget was not the limit: a larger one would not have been spent"
         )
         text = f"{text} ({why}; best verified point so far — {hint})"

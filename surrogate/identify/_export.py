@@ -53,7 +53,7 @@ class ExportResult:
     """Keys of ``surrogate export --json``.
 
     ``source`` is ``run`` or ``calibration``; ``status`` the source's
-    (``verified``; ``converged`` or ``budget_exhausted``). ``ecoat_gpa``,
+    (``verified``; ``converged``, ``budget_exhausted`` or ``stalled``). ``ecoat_gpa``,
     ``scoat_gpa``, ``tcoat_mm`` are the coat the card carries (for a calibration:
     evaluated at ``conditions``); ``parameters`` holds ``ECOAT``, ``SCOAT``,
     ``TCOAT`` as written (deck ``units``, TCOAT by ``tcoat_convention``);

@@ -46,8 +46,11 @@ _LEAST_LIKELY = 1e-9  # a chance of meeting the target below this is none
 class RunResult:
     """Keys of ``surrogate run --json``.
 
-    ``verified`` is the chosen verified point (when ``status`` is
-    ``budget_exhausted``: the best verified point, which misses the target).
+    ``status`` is ``verified`` where a verified point meets the target; else
+    ``budget_exhausted`` where the budget is what stopped the loop, or ``stalled`` where
+    it stopped with runs left (the search proposed no point not verified already: a
+    larger budget would not have been spent). ``verified`` is the chosen verified point
+    (unverified statuses: the best verified point, which misses the target).
     ``solver_calls`` counts every full-solver run of the study, the
     identifiability runs after verification included; ``calls_to_verify``
     the runs until a verified point met the target.
@@ -368,7 +371,12 @@ def _result(
     fidelity: _Fidelity | None,
 ) -> RunResult:
     chosen = verifier.chosen()
-    status = "verified" if chosen is not None else "budget_exhausted"
+    if chosen is not None:
+        status = "verified"
+    elif verifier.calls >= spec.budget.max_solver_calls:
+        status = "budget_exhausted"
+    else:
+        status = "stalled"
     point = chosen or verifier.best()
     verified = None
     identifiability: dict[str, Any] = {}
@@ -511,10 +519,19 @@ def _message(
             f"the target {target:.4g} N and every constraint holds, after "
             f"{calls_to_verify} full-solver runs"
         )
+    ended = (
+        f"budget exhausted after {verifier.calls} runs"
+        if status == "budget_exhausted"
+        else (
+            f"stalled after {verifier.calls} of {spec.budget.max_solver_calls} runs: the "
+            "search proposed no point not verified already, so a larger budget would not "
+            "have been spent"
+        )
+    )
     if point is None:
         reasons = [r.reason for r in verifier.records.values() if r.reason]
         return (
-            f"budget exhausted after {verifier.calls} runs and no solver run succeeded"
+            f"{ended} and no solver run succeeded"
             + (f" (the last: {reasons[-1]})" if reasons else "")
             + "; check the rig, the parameter ranges and the solver"
         )
@@ -527,8 +544,8 @@ def _message(
             "widen them or check the target."
         )
     return (
-        f"budget exhausted: no verified point meets the target {target:.4g} N "
-        f"(± {100 * tolerance:g} %) with every constraint after {verifier.calls} runs; "
+        f"{ended}: no verified point meets the target {target:.4g} N "
+        f"(± {100 * tolerance:g} %) with every constraint; "
         f"the best has F60 = {point.f60_n:.4g} N "
         f"(misfit {100 * point.misfit:.2f} %).{why}"
     )
