@@ -23,7 +23,7 @@ from optuna.distributions import BaseDistribution
 
 from .._errors import InputDataError
 from .._log import show_progress
-from .._pool import check_jobs
+from .._pool import check_jobs, one_blas_thread_within
 from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import distributions, quiet_optuna
 from ..storage._storage import open_storage
@@ -124,6 +124,7 @@ class CalibrationResult:
 
 
 # -- the command -------------------------------------------------------------------------------
+@one_blas_thread_within
 def calibrate(
     study: str | Path | StudySpec,
     *,

@@ -27,6 +27,7 @@ import optuna
 
 from .._errors import InputDataError, SolverError
 from .._log import show_progress
+from .._pool import one_blas_thread_within
 from ..physics import curve_features
 from ..storage._optuna import quiet_optuna
 from ._calibrate import calibration_note
@@ -111,6 +112,7 @@ class Comparison:
     result: CompareResult
 
 
+@one_blas_thread_within
 def compare(
     study: Any,
     *,

@@ -51,7 +51,7 @@ import optuna
 
 from .._errors import InputDataError
 from .._log import show_progress
-from .._pool import check_jobs, cpu_jobs, imap_unordered, worker_count
+from .._pool import check_jobs, cpu_jobs, imap_unordered, one_blas_thread_within, worker_count
 from ..effects import available_effects, get_effect
 from ..solvers import get_solver
 from ..solvers._fidelity import fidelity_record
@@ -137,6 +137,7 @@ class DiagnosisResult:
         return asdict(self)
 
 
+@one_blas_thread_within
 def diagnose(
     study: Any,
     *,

@@ -13,6 +13,7 @@ import pandas as pd
 
 from .._errors import InputDataError
 from .._io import atomic_write_text
+from .._pool import one_blas_thread_within
 from ..effects import check_effects
 from ..solvers._batch import evaluate_design
 from ..study._rig import Rig
@@ -84,6 +85,7 @@ def _study_or_none(
     return spec
 
 
+@one_blas_thread_within
 def doe(
     design: str = "lhs",
     *,
@@ -187,6 +189,7 @@ def fit_surrogate(
     )
 
 
+@one_blas_thread_within
 def fit(
     samples: str | Path | SampleSet, *, out: str | Path | None = None, seed: int = 0
 ) -> FitResult:
@@ -203,6 +206,7 @@ def fit(
     )
 
 
+@one_blas_thread_within
 def predict(
     model: str | Path | CoatingSurrogate,
     points: str | Path | pd.DataFrame,

@@ -22,6 +22,7 @@ from scipy.stats import norm
 
 from .._errors import InputDataError
 from .._log import show_progress
+from .._pool import one_blas_thread_within
 from ..solvers._fidelity import MissCounter, fidelity_record
 from ..storage._dashboard import attach_run_report
 from ..storage._optuna import distributions
@@ -80,6 +81,7 @@ class RunResult:
         return asdict(self)
 
 
+@one_blas_thread_within
 def run(
     study: str | Path | StudySpec,
     *,
