@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from surrogate import PAPER_SPACE, SampleSet, make_design
-from surrogate._pool import imap_unordered
+from surrogate._pool import imap_unordered, one_blas_thread_within
 from surrogate.solvers._batch import evaluate_design
 from tests.conftest import CountingSolve
 
@@ -86,3 +86,28 @@ def test_a_pool_forks_no_more_processes_than_it_has_tasks():
         seen.append(pid)
         assert len(multiprocessing.active_children()) <= 2
     assert len(seen) == 2 and os.getpid() not in seen
+
+
+def test_the_api_computes_with_one_blas_thread_and_gives_the_callers_back():
+    """Inside an API function every BLAS library NumPy and SciPy loaded has one thread;
+    after it, the caller's setting (two here) is back, also after an error."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from surrogate import simulate
+
+    seen = []
+
+    @one_blas_thread_within
+    def probe(fail=False):
+        seen.append(sorted(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"))
+        if fail:
+            raise RuntimeError("inside")
+
+    with threadpool_limits(2, user_api="blas"):
+        probe()
+        with pytest.raises(RuntimeError):
+            probe(fail=True)
+        after = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    assert len(seen[0]) >= 2 and seen == [[1] * len(seen[0])] * 2  # NumPy's and SciPy's
+    assert after == [2] * len(after)
+    assert simulate.__wrapped__ is not None and simulate.__name__ == "simulate"

@@ -127,8 +127,6 @@ def test_a_surrogate_that_has_not_learned_the_space_does_not_end_the_global_phas
         assert result.status in ("budget_exhausted", "stalled"), result.message
         assert result.determination is None
         assert "not at a verified local optimum" in result.message
-        spent = "raise --budget" in result.message
-        assert spent == (result.status == "budget_exhausted")
 
 
 def test_a_budget_too_small_says_budget_exhausted_and_claims_nothing(tmp_path):

@@ -143,6 +143,9 @@ def test_a_search_with_nothing_new_to_verify_ends_stalled_not_budget_exhausted(
     assert f"stalled after {result.solver_calls} of 10 runs" in result.message
     assert "a larger budget would not have been spent" in result.message
     assert "budget exhausted" not in result.message
+    with pytest.raises(InputDataError, match="stalled with runs left"):
+        surrogate.export(study_file, output=study_file.parent / "coat.k")
+    assert not (study_file.parent / "coat.k").exists()
 
 
 def test_cli_run_json(study_file):
@@ -173,7 +176,7 @@ def test_cli_run_json(study_file):
         "storage",
         "identifiability",
     }
-    assert payload["status"] in ("verified", "budget_exhausted")
+    assert payload["status"] in ("verified", "budget_exhausted", "stalled")
     if payload["status"] == "verified":
         assert set(payload["verified"]) == {
             "ecoat_gpa",

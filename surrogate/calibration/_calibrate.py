@@ -66,8 +66,9 @@ class CalibrationResult:
     ``status`` is ``converged`` only when the local phase's first-order test held
     at ``params`` (a verified point; see :mod:`surrogate.calibration._local`); else
     ``budget_exhausted`` where the budget is what stopped it (no further verification
-    fitted in it), or ``stalled`` where the local phase stopped with runs left (rounds
-    whose test found nothing better: a larger budget would not have been spent).
+    fitted in it), or ``stalled`` where it stopped with runs left (e.g. four rounds
+    whose test found nothing better; the message says why): a larger budget would not
+    have been spent.
     ``params`` is then the best verified point.
     ``predicted_gain`` is what that test measured: the relative RMSE decrease the
     Gauss–Newton model still promises within ±5 % of each range (``None`` unless

@@ -225,9 +225,15 @@ def _verified_run(spec: StudySpec, url: str, conditions: Mapping[str, Any]) -> _
     study, name = _load(spec, url, "verify", "surrogate run")
     chosen = Verifier(spec, study, progress=False).chosen()
     if chosen is None:
+        stalled = (study.user_attrs.get("result") or {}).get("status") == "stalled"
         raise InputDataError(
             f"no verified point of {name!r} meets the target and every constraint yet; "
-            "run `surrogate run` (with a larger --budget) first"
+            + (
+                "its last `surrogate run` stalled with runs left (its message says why: a "
+                "larger --budget would not have been spent)"
+                if stalled
+                else "run `surrogate run` (with a larger --budget) first"
+            )
         )
     p = chosen.params
     target = spec.targets.f60_n

@@ -32,7 +32,7 @@ from optuna.trial import TrialState
 
 from .._errors import InputDataError
 from .._log import show_progress
-from .._pool import check_jobs, one_blas_thread, process_context
+from .._pool import check_jobs, one_blas_thread, one_blas_thread_within, process_context
 from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..storage._optuna import quiet_optuna, suggest
@@ -169,6 +169,7 @@ class _Interrupted(BaseException):
     """Raised in the main thread by SIGTERM while a solve runs."""
 
 
+@one_blas_thread_within
 def work(
     study: str | Path | StudySpec,
     *,

@@ -310,10 +310,15 @@ def _determination(record: Mapping[str, Any]) -> str:
     parts = ["<h3>Parameters and what the curves determine</h3>"]
     parts.append(_table(["quantity", "value", "95 % interval"], rows))
     if determination is None:
+        hint = (
+            "raise --budget"
+            if record.get("status") == "budget_exhausted"
+            else "it stopped with runs left: its message says why"
+        )
         parts.append(
             _p(
                 "No intervals: the calibration did not converge to a verified local optimum, "
-                "so the data's determination was not assessed (raise --budget).",
+                f"so the data's determination was not assessed ({hint}).",
                 "missing",
             )
         )

@@ -21,6 +21,7 @@ from typing import Any
 
 from .._errors import InputDataError
 from .._io import atomic_write_text
+from .._pool import one_blas_thread_within
 from ..effects import check_effects
 from ..storage._dashboard import artifact_folder, attach_file
 from ..storage._storage import open_storage, redacted_url, storage_errors
@@ -57,6 +58,7 @@ class ReportResult:
         return asdict(self)
 
 
+@one_blas_thread_within
 def report(
     study: str | Path | StudySpec,
     *,

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from .._pool import one_blas_thread_within
 from ..study import Rig
 from ._base import get_solver
 from ._batch import solver_inputs
@@ -63,6 +64,7 @@ class BendingCurve:
         }
 
 
+@one_blas_thread_within
 def simulate(
     ecoat_gpa: float,
     scoat_gpa: float,
