@@ -29,6 +29,7 @@ import numpy as np
 
 from .._errors import InputDataError
 from .._io import atomic_write_text
+from .._pool import one_blas_thread_within
 from ..study._space import ParameterSpace
 from ._basis import PrincipalBasis
 from ._features import FeatureMap
@@ -79,6 +80,7 @@ class CoatingSurrogate:
         self.curve_variance = curve_variance
 
     # -- fitting ---------------------------------------------------------------------------
+    @one_blas_thread_within
     def fit(
         self,
         X: np.ndarray,
@@ -149,6 +151,7 @@ class CoatingSurrogate:
         return self.curve_pca_.basis
 
     # -- prediction ------------------------------------------------------------------------
+    @one_blas_thread_within
     def predict(self, X: np.ndarray, return_std: bool = False) -> dict[str, np.ndarray]:
         """``{"f60_n", "theta_sat_deg"}`` (and ``…_std``) at ``X`` (n, d)."""
         Z = self._features(X)
@@ -161,6 +164,7 @@ class CoatingSurrogate:
             out["log_f60_std"] = sd
         return out
 
+    @one_blas_thread_within
     def predict_curve(self, X: np.ndarray, return_std: bool = False):
         """Predicted curves (n, m) at :attr:`angle_deg_` (and their std)."""
         if self.curves_train_ is None:
@@ -190,6 +194,7 @@ class CoatingSurrogate:
         return self.features_.transform(X)
 
     # -- cross-validation ------------------------------------------------------------------
+    @one_blas_thread_within
     def cross_validate(self) -> dict[str, dict[str, float]]:
         """Leave-one-out error and 95 %-interval coverage of each output."""
         mu, sd = self.f60_gp_.loo()
