@@ -106,6 +106,29 @@ def test_the_prior_saves_expensive_runs_against_the_single_fidelity_loop(
     assert calls["single"] >= 6
 
 
+def test_a_corrected_search_with_nothing_new_to_verify_ends_stalled(
+    distorted_solver, log_runs, monkeypatch
+):
+    """The corrected search stops with runs left where it proposes no point it has not
+    verified (scripted after its first proposal, the target out of reach): ``stalled``,
+    the correction still trusted, the expensive runs counted."""
+    import surrogate.identify._loop as loop
+
+    real, proposed = loop._propose, []
+
+    def once(*args, **kwargs):
+        proposed.append(1)
+        return real(*args, **kwargs) if len(proposed) == 1 else np.empty((0, 3))
+
+    monkeypatch.setattr(loop, "_propose", once)
+    path = _paper_study(log_runs / "mf", "")
+    result = surrogate.run(path, target=500.0, progress=False)
+    assert result.status == "stalled", result.message
+    assert result.multi_fidelity["dropped"] is None
+    assert result.solver_calls == _expensive_runs(log_runs) < 30
+    assert f"stalled after {result.solver_calls} of 30 runs" in result.message
+
+
 def test_a_correction_too_large_is_dropped_and_the_single_fidelity_loop_verifies(
     distorted_solver, log_runs
 ):
