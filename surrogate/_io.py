@@ -6,7 +6,9 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_write_text"]
+from ._errors import InputDataError
+
+__all__ = ["atomic_write_text", "check_output_file", "check_output_folder"]
 
 
 def _umask() -> int:
@@ -15,12 +17,38 @@ def _umask() -> int:
     return mask
 
 
+def check_output_file(path: str | os.PathLike[str]) -> Path:
+    """``path`` as a file to write, or the one-line error every command gives: a folder
+    named where a file is wanted, or a folder that does not exist (not created: a typo
+    would otherwise make folders anywhere). Called before the work, not only at the
+    write, so nothing is computed for an output that cannot be written."""
+    target = Path(path)
+    if target.is_dir():
+        raise InputDataError(f"{target} is a folder; name the file to write")
+    folder = target.parent if str(target.parent) else Path(".")
+    if not folder.is_dir():
+        raise InputDataError(f"output folder {folder} does not exist; create it first")
+    return target
+
+
+def check_output_folder(path: str | os.PathLike[str]) -> Path:
+    """``path`` as a folder to write files into (made if its parent exists), or the
+    one-line error: a file named where a folder is wanted, or a missing parent."""
+    target = Path(path)
+    if target.exists() and not target.is_dir():
+        raise InputDataError(f"{target} is a file; name a folder to write the figures into")
+    parent = target.parent if str(target.parent) else Path(".")
+    if not target.exists() and not parent.is_dir():
+        raise InputDataError(f"output folder {parent} does not exist; create it first")
+    return target
+
+
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
     """Write ``text`` to ``path`` through a temporary file and a rename.
 
     A crash or an error leaves either the old file or the new one, never half.
     """
-    target = Path(path)
+    target = check_output_file(path)
     directory = target.parent if str(target.parent) else Path(".")
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
     try:

@@ -6,7 +6,7 @@ import math
 
 from ._errors import InputDataError
 
-__all__ = ["check_finite", "check_positive", "check_range"]
+__all__ = ["check_finite", "check_positive", "check_range", "check_seed"]
 
 
 def check_finite(name: str, value: object) -> float:
@@ -18,6 +18,13 @@ def check_finite(name: str, value: object) -> float:
     if not math.isfinite(number):
         raise InputDataError(f"{name} must be a finite number, got {value!r}")
     return number
+
+
+def check_seed(seed: object) -> int:
+    """``--seed``: a whole number ≥ 0 (what NumPy's and SciPy's generators take)."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise InputDataError(f"--seed must be a whole number ≥ 0, got {seed!r}")
+    return seed
 
 
 def check_positive(name: str, value: object, *, unit: str = "") -> float:

@@ -26,6 +26,7 @@ import numpy as np
 import optuna
 
 from .._errors import InputDataError, SolverError
+from .._io import check_output_folder
 from .._log import show_progress
 from .._pool import one_blas_thread_within
 from ..physics import curve_features
@@ -142,6 +143,8 @@ def compare(
     """
     if progress:
         show_progress()
+    if plots and output_dir is not None:
+        check_output_folder(output_dir)
     found = comparison(study, params=params, effects=effects, plugins=plugins, storage=storage)
     result, problem = found.result, found.problem
     if plots:

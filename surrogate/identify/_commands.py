@@ -12,8 +12,9 @@ import numpy as np
 import pandas as pd
 
 from .._errors import InputDataError
-from .._io import atomic_write_text
+from .._io import atomic_write_text, check_output_file
 from .._pool import one_blas_thread_within
+from .._validate import check_seed
 from ..effects import check_effects
 from ..solvers._batch import evaluate_design
 from ..study._rig import Rig
@@ -112,10 +113,8 @@ def doe(
     spec = _study_or_none(study, runs=run, plugins=plugins)
     space = spec.space if spec is not None else PAPER_SPACE
     rig = spec.rig if spec is not None else Rig()
-    seed = seed if seed is not None else (spec.seed if spec is not None else 0)
-    out = Path(out)
-    if not out.parent.exists():
-        raise InputDataError(f"output folder {out.parent} does not exist; create it first")
+    seed = check_seed(seed if seed is not None else (spec.seed if spec is not None else 0))
+    out = check_output_file(out)
     if points_file is not None:
         design = "file"
         points = _read_design(points_file, space)
@@ -194,9 +193,10 @@ def fit(
     samples: str | Path | SampleSet, *, out: str | Path | None = None, seed: int = 0
 ) -> FitResult:
     """Fit the surrogates to a sample set, cross-validate, and save as JSON."""
+    check_seed(seed)
     sample_set = samples if isinstance(samples, SampleSet) else SampleSet.read(samples)
-    if out is not None and not Path(out).parent.exists():
-        raise InputDataError(f"output folder {Path(out).parent} does not exist; create it first")
+    if out is not None:
+        check_output_file(out)
     model = fit_surrogate(sample_set, seed=seed)
     cv = model.cross_validate()
     if out is not None:
@@ -216,6 +216,8 @@ def predict(
     """Predict F60 and θsat (with standard deviations) at the points."""
     from ..gp import CoatingSurrogate
 
+    if out is not None:
+        check_output_file(out)
     surrogate = model if isinstance(model, CoatingSurrogate) else CoatingSurrogate.load(model)
     names = surrogate.space.names
     table = points.copy() if isinstance(points, pd.DataFrame) else read_points(points, names)
@@ -228,8 +230,6 @@ def predict(
     for key in ("f60_n", "f60_n_std", "theta_sat_deg", "theta_sat_deg_std"):
         table[key] = pred[key]
     if out is not None:
-        if not Path(out).parent.exists():
-            raise InputDataError(f"output folder {Path(out).parent} does not exist")
         buffer = io.StringIO()
         table.to_csv(buffer, index=False, float_format="%.8g")
         atomic_write_text(out, buffer.getvalue())

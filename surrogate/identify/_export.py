@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from .._errors import InputDataError
-from .._io import atomic_write_text
+from .._io import atomic_write_text, check_output_file
 from ..effects import ModelState, check_effects, get_effect
 from ..solvers._state import coating_state, model_state_of
 from ..study._spec import StudySpec, load_study
@@ -157,8 +157,8 @@ def export(
         raise InputDataError(
             "a surrogate run point has no effects; export a calibration (--from calibration)"
         )
-    if output is not None and not Path(output).parent.exists():
-        raise InputDataError(f"output folder {Path(output).parent} does not exist; create it first")
+    if output is not None:
+        check_output_file(output)
     url = storage or spec.default_storage()
     conditions = dict(at or {})
     found = (

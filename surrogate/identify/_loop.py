@@ -23,6 +23,7 @@ from scipy.stats import norm
 from .._errors import InputDataError
 from .._log import show_progress
 from .._pool import one_blas_thread_within
+from .._validate import check_seed
 from ..solvers._fidelity import MissCounter, fidelity_record
 from ..storage._dashboard import attach_run_report
 from ..storage._optuna import distributions
@@ -214,9 +215,7 @@ def _with_overrides(
 ) -> StudySpec:
     spec = study if isinstance(study, StudySpec) else load_study(study)
     if seed is not None:
-        if seed < 0:
-            raise InputDataError(f"--seed must be ≥ 0, got {seed}")
-        spec = dataclasses.replace(spec, seed=seed)
+        spec = dataclasses.replace(spec, seed=check_seed(seed))
     if target is not None:
         if not np.isfinite(target) or target <= 0:
             raise InputDataError(f"target f60_n must be a number > 0, got {target!r}")
