@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import operator
 
 from ._errors import InputDataError
 
@@ -21,10 +22,15 @@ def check_finite(name: str, value: object) -> float:
 
 
 def check_seed(seed: object) -> int:
-    """``--seed``: a whole number ≥ 0 (what NumPy's and SciPy's generators take)."""
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+    """``--seed``: a whole number ≥ 0 (what NumPy's and SciPy's generators take; a
+    NumPy integer too)."""
+    try:
+        value = operator.index(seed)  # type: ignore[arg-type]
+    except TypeError:
+        value = -1
+    if isinstance(seed, bool) or value < 0:
         raise InputDataError(f"--seed must be a whole number ≥ 0, got {seed!r}")
-    return seed
+    return value
 
 
 def check_positive(name: str, value: object, *, unit: str = "") -> float:
