@@ -48,13 +48,18 @@ class _Dashboard:
     def detail(self, study_name):
         """The dashboard's view of one study (trials, figures, note)."""
         summaries = None
-        for _ in range(60):
+        deadline = time.monotonic() + 180.0  # its start is imports: slow on a loaded machine
+        while summaries is None and time.monotonic() < deadline:
             try:
                 summaries = self._get("/api/studies")["study_summaries"]
-                break
             except OSError:
+                if self.server.poll() is not None:  # it ended: no point waiting
+                    break
                 time.sleep(0.25)
-        assert summaries, "the dashboard did not answer on 127.0.0.1"
+        assert summaries, (
+            f"the dashboard did not answer on 127.0.0.1 (exit code {self.server.poll()}; "
+            f"{self.server.stderr.read() if self.server.poll() is not None else 'still running'})"
+        )
         study_id = next(s["study_id"] for s in summaries if s["study_name"] == study_name)
         return self._get(f"/api/studies/{study_id}?after=0")
 
