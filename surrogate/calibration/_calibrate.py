@@ -26,7 +26,7 @@ from .._log import show_progress
 from .._pool import check_jobs, one_blas_thread_within
 from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import distributions, quiet_optuna
-from ..storage._storage import open_storage
+from ..storage._storage import check_storage_url, open_storage
 from ..study._space import ParameterSpace
 from ..study._spec import StudySpec
 from ._determination import at_bound_text, interval_text, parameter_interval_text
@@ -204,6 +204,8 @@ def run_calibration(
     if progress:
         show_progress()
     spec, data, chosen, noise = load_calibration(study, effects, plugins)
+    url = storage or spec.default_storage()
+    check_storage_url(url)  # before the work, not after
     problem = CalibrationProblem(spec, data, chosen, tests=tests)
     cache = spec.directory / ".solver-cache"
     budget = max_solver_calls or spec.budget.calibration_solver_calls
@@ -230,8 +232,15 @@ def run_calibration(
         loop = CalibrationLoop(
             problem, runs, noise=noise, budget=LOW_FIDELITY_BUDGET, progress=progress, label=name
         )
+    smallest, made_of = loop.smallest_budget()
+    if expensive and budget < smallest:  # refused before any run, not overshot
+        where = "--budget" if max_solver_calls else "[budget] calibration_solver_calls"
+        raise InputDataError(
+            f"{where} {budget} is too small for this calibration: it needs at least "
+            f"{smallest} solver runs ({made_of}); raise it"
+        )
     loop.run(spec.budget.surrogate_trials)
-    result = _result(loop, chosen, storage or spec.default_storage())
+    result = _result(loop, chosen, url)
     if record and expensive:
         _record(result.storage, name, problem, loop.verified, result, data_hash(spec))
     return result, loop

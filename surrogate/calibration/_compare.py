@@ -31,6 +31,7 @@ from .._log import show_progress
 from .._pool import one_blas_thread_within
 from ..physics import curve_features
 from ..storage._optuna import quiet_optuna
+from ..storage._storage import check_storage_url, missing_local_storage, open_storage
 from ._calibrate import calibration_note
 from ._loop import SolverRuns
 from ._problem import CalibrationProblem, calibration_study_name, load_calibration, model_label
@@ -88,6 +89,10 @@ def latest_calibration(
 ) -> dict[str, Any] | None:
     """The stored result of the calibration study ``name`` in ``storage`` (a URL or an
     opened storage), if any."""
+    if isinstance(storage, str):
+        if missing_local_storage(storage) is not None:  # none yet: nothing is created
+            return None
+        storage = open_storage(storage)
     try:
         study = optuna.load_study(study_name=name, storage=storage)
     except KeyError:
@@ -174,6 +179,7 @@ def comparison(
     spec, data, chosen, noise = load_calibration(study, effects, plugins)
     problem = CalibrationProblem(spec, data, chosen)
     url = storage or spec.default_storage()
+    check_storage_url(url)  # before the work
     name = calibration_study_name(spec, chosen)
     stored = None if params is not None else latest_calibration(url, name)
     theta = _parameters(problem, params if stored is None else stored["params"], url, name)

@@ -194,6 +194,12 @@ class CorrectedCalibration(CalibrationLoop):
         self.short: str | None = None  # why an expensive test was not started: the budget left
         self.inherited = bool(self.correction.n_runs)  # learned on another model
 
+    def smallest_budget(self) -> tuple[int, str]:
+        """One verification by the expensive solver (a run at every condition group): at
+        the corrected model's optimum."""
+        G = len(self.problem.groups)
+        return G, f"one verification by the expensive solver: a run at each of {G} conditions"
+
     # -- the runs -------------------------------------------------------------------------------
     def corrected_runs(self, correction: CurveCorrection | None) -> CorrectedRuns:
         return CorrectedRuns(

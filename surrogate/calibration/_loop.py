@@ -384,7 +384,7 @@ class CalibrationLoop:
         G = len(self.problem.groups)
         self._initial_design()
         # the local phase needs what is left: the global phase takes at most half the budget
-        stale, half = 0, max(self.budget // 2, self.runs.calls + G)
+        stale, half = 0, min(self.budget, max(self.budget // 2, self.runs.calls + G))
         while self.verifications_left(half) and len(self.runs.X) >= 3:
             self.iterations += 1
             self._fit(model)
@@ -402,11 +402,28 @@ class CalibrationLoop:
                 self._say(f"global phase done: {STALE_LIMIT} verifications without improvement")
                 return
 
+    def design_size(self) -> int:
+        """Runs of the initial design: ``max(2d + 2, 2G)`` (d parameters, G condition groups)."""
+        return max(2 * len(self.problem.space) + 2, 2 * len(self.problem.groups))
+
+    def smallest_budget(self) -> tuple[int, str]:
+        """The fewest solver runs this loop can do anything with, and what they are: its
+        initial design and one verification (a run at every condition group)."""
+        G = len(self.problem.groups)
+        return (
+            self.design_size() + G,
+            f"an initial design of {self.design_size()} and one verification at the "
+            f"{G} condition group{'s' if G != 1 else ''}",
+        )
+
     def _initial_design(self) -> None:
-        """A Latin hypercube of ``max(2d + 2, 2G)`` points, each at one condition group in turn."""
+        """A Latin hypercube of :meth:`design_size` points, each at one condition group in
+        turn (no more than the budget has left: a loop that takes over late)."""
         problem = self.problem
         d, G = len(problem.space), len(problem.groups)
-        n0 = max(2 * d + 2, 2 * G)
+        n0 = min(self.design_size(), max(0, self.budget - self.runs.calls))
+        if n0 == 0:
+            return
         unit = qmc.LatinHypercube(d=d, seed=self.seed).random(n0)
         thetas = problem.space.from_unit(unit)
         self.runs.run(thetas, [i % G for i in range(n0)])

@@ -47,7 +47,9 @@ from .._pool import check_jobs
 
 __all__ = [
     "StorageError",
+    "check_storage_url",
     "check_workers",
+    "local_storage_file",
     "normalise_storage_url",
     "open_storage",
     "redacted_url",
@@ -155,13 +157,34 @@ def journal_path(url: str) -> Path | None:
     return Path(url.removeprefix("journal://")) if url.startswith("journal://") else None
 
 
-def missing_local_storage(url: str) -> Path | None:
-    """The SQLite or journal file of ``url`` if it does not exist yet, else None."""
+def local_storage_file(url: str) -> Path | None:
+    """The SQLite or journal file of ``url``; None for a server (or an in-memory SQLite)."""
     url = normalise_storage_url(url)
     local = journal_path(url)
     if url.startswith("sqlite:///"):
         local = Path(url.removeprefix("sqlite:///").split("?")[0].removeprefix("file:"))
+    return local
+
+
+def missing_local_storage(url: str) -> Path | None:
+    """The SQLite or journal file of ``url`` if it does not exist yet, else None."""
+    local = local_storage_file(url)
     return local if local is not None and not local.exists() else None
+
+
+def check_storage_url(url: str) -> str:
+    """``url`` normalised, refused (InputDataError) where it cannot name a storage: an
+    unknown scheme, or a SQLite or journal file in a folder that does not exist. Cheap
+    and creates nothing: a command checks it before its work, not after."""
+    normalised = normalise_storage_url(url)
+    local = local_storage_file(normalised)
+    if local is not None and not local.parent.is_dir():
+        raise InputDataError(
+            f"--storage {url}: folder {local.parent} does not exist; create it first"
+        )
+    if local is not None and local.is_dir():
+        raise InputDataError(f"--storage {url}: {local} is a folder; name the file to use")
+    return normalised
 
 
 def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool = False) -> Any:
@@ -178,7 +201,7 @@ def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool =
         Refuse a SQLite or journal file that does not exist yet instead of
         creating it (a worker joins an existing plan).
     """
-    url = normalise_storage_url(url)
+    url = check_storage_url(url)
     if heartbeat_s is not None and (
         isinstance(heartbeat_s, bool) or not isinstance(heartbeat_s, int) or heartbeat_s < 1
     ):

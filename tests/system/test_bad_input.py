@@ -27,6 +27,8 @@ STUDY = (REPO / "studies" / "paper_coating.toml").read_text()
 MAGIC = STUDY + '\n[model]\neffects = ["magic"]\n'
 HARDENING = '\n[model]\neffects = ["hardening"]\n'
 SIM = ["simulate", "--ecoat", "1", "--scoat", "0.2", "--tcoat", "0.012"]
+MEASURED = (REPO / "studies" / "webbing_tests.toml").read_text()
+MEASURED = MEASURED.replace('"../data/measurements/', '"')  # the data beside it
 
 
 def _study(old: str, new: str) -> str:
@@ -180,6 +182,27 @@ CASES = [
             ["diagnose", "magic.toml"],
         )
     ],
+    # calibrate, compare and diagnose: refused before the work (a calibration used to run
+    # its 12 runs, then say the storage's scheme was unknown or that 12 of 10 were used)
+    ("calibrate-budget-below-design", {}, ["calibrate", "webbing.toml", "--budget", "10"]),
+    (
+        "calibrate-study-budget-below-design",
+        {
+            "small.toml": MEASURED.replace(
+                "calibration_solver_calls = 200", "calibration_solver_calls = 11"
+            )
+        },
+        ["calibrate", "small.toml"],
+    ),
+    ("calibrate-storage-unknown-scheme", {}, ["calibrate", "webbing.toml", "--storage", "foo://x"]),
+    (
+        "calibrate-storage-folder-missing",
+        {},
+        ["calibrate", "webbing.toml", "--storage", "sqlite:///{d}/no/x.db"],
+    ),
+    ("diagnose-storage-unknown-scheme", {}, ["diagnose", "webbing.toml", "--storage", "foo://x"]),
+    ("compare-storage-unknown-scheme", {}, ["compare", "webbing.toml", "--storage", "foo://x"]),
+    ("compare-nothing-calibrated", {}, ["compare", "webbing.toml"]),  # no empty storage left
     ("effect-known-run", {"hard.toml": STUDY + HARDENING}, ["run", "hard.toml"]),
     (
         "effect-known-doe-run",
@@ -194,6 +217,8 @@ def project(tmp_path_factory):
     """A project folder with data, two storages and a result cache."""
     folder = tmp_path_factory.mktemp("project")
     (folder / "paper_coating.toml").write_text(STUDY)
+    (folder / "webbing.toml").write_text(MEASURED)
+    shutil.copy(REPO / "data" / "measurements" / "webbing_tests.csv", folder)
     for name in ("paper_stage1_samples.csv", "paper_stage1_samples_curves.csv"):
         shutil.copy(REPO / "data" / name, folder / name.replace("paper_stage1_", ""))
     spec = load_study(folder / "paper_coating.toml")
