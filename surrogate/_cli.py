@@ -868,6 +868,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         _fail(f"error: {error}", EXIT_USAGE)
     except SolverError as error:
         _fail(f"solver error: {error}", EXIT_SOLVER)
+    except IsADirectoryError as error:
+        _fail(f"error: {error.filename} is a folder; name a file in it", EXIT_USAGE)
     except OSError as error:
         _fail(f"error: {error.strerror or error}: {error.filename}", EXIT_USAGE)
     except Exception as error:

@@ -25,9 +25,14 @@ def check_output_file(path: str | os.PathLike[str]) -> Path:
     target = Path(path)
     if target.is_dir():
         raise InputDataError(f"{target} is a folder; name the file to write")
-    folder = target.parent if str(target.parent) else Path(".")
+    folder = target.parent  # "." for a bare file name
     if not folder.is_dir():
-        raise InputDataError(f"output folder {folder} does not exist; create it first")
+        state = (
+            "is a file; choose another" if folder.exists() else "does not exist; create it first"
+        )
+        raise InputDataError(f"output folder {folder} {state}")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputDataError(f"output folder {folder} is not writable; choose another")
     return target
 
 
@@ -37,7 +42,7 @@ def check_output_folder(path: str | os.PathLike[str]) -> Path:
     target = Path(path)
     if target.exists() and not target.is_dir():
         raise InputDataError(f"{target} is a file; name a folder to write the figures into")
-    parent = target.parent if str(target.parent) else Path(".")
+    parent = target.parent
     if not target.exists() and not parent.is_dir():
         raise InputDataError(f"output folder {parent} does not exist; create it first")
     return target
@@ -49,8 +54,7 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
     A crash or an error leaves either the old file or the new one, never half.
     """
     target = check_output_file(path)
-    directory = target.parent if str(target.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as handle:
             handle.write(text)

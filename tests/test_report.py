@@ -266,7 +266,7 @@ def test_an_output_folder_that_cannot_be_written_is_refused(tmp_path, capsys):
     study = _verified(tmp_path)
     before = sorted(p.name for p in tmp_path.iterdir())
     assert "does not exist" in _refused([study, "--output", tmp_path / "no" / "r.html"], capsys)
-    assert "is not a folder" in _refused([study, "--output", study / "r.html"], capsys)
+    assert "is a file; choose another" in _refused([study, "--output", study / "r.html"], capsys)
     assert "is a folder" in _refused([study, "--output", tmp_path], capsys)
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 

@@ -264,7 +264,10 @@ def _calibrated(
     study, name = _load(spec, url, f"calibrate/{label}", "surrogate calibrate")
     result = study.user_attrs.get("result")
     if not isinstance(result, dict) or "params" not in result:
-        raise InputDataError(f"{name!r} in {url} holds no calibration result; run it again")
+        raise InputDataError(
+            f"{name!r} in {url} holds no calibration result (`compare --params` stores only "
+            "its figures there); run `surrogate calibrate` for this model first"
+        )
     params = result["params"]
     effects: dict[str, dict[str, float]] = {effect: {} for effect in model}
     for key, value in params.items():

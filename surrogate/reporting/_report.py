@@ -12,7 +12,6 @@ lists it.
 from __future__ import annotations
 
 import logging
-import os
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
@@ -20,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from .._errors import InputDataError
-from .._io import atomic_write_text
+from .._io import atomic_write_text, check_output_file
 from .._pool import one_blas_thread_within
 from ..effects import check_effects
 from ..storage._dashboard import artifact_folder, attach_file
@@ -90,7 +89,7 @@ def report(
     spec = study if isinstance(study, StudySpec) else load_study(study)
     check_effects(spec.effects, plugins)
     target = Path(output) if output is not None else spec.directory / f"{spec.name}-report.html"
-    _check_output(target)
+    check_output_file(target)
     _check_plotly()
     url = storage or spec.default_storage()
     findings = gather(spec, url)
@@ -104,17 +103,6 @@ def report(
         missing=dict(findings.missing),
         attached=_attach(findings, target),
     )
-
-
-def _check_output(target: Path) -> None:
-    folder = target.parent
-    if target.is_dir():
-        raise InputDataError(f"--output {target} is a folder; name the HTML file to write")
-    if not folder.is_dir():
-        state = "is not a folder" if folder.exists() else "does not exist"
-        raise InputDataError(f"output folder {folder} {state}; create it or choose another")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise InputDataError(f"output folder {folder} is not writable; choose another --output")
 
 
 def _check_plotly() -> None:

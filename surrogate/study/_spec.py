@@ -162,6 +162,10 @@ def _study(section: dict[str, Any], where: str) -> tuple[str, int, str | None]:
     """``[study]``: the name, the seed and the storage URL (None: next to the file)."""
     _only(section, ("name", "seed", "storage"), where, "study")
     name = section.get("name")
+    if name is None:
+        raise InputDataError(
+            f'{where}: no [study] name; a study file starts with [study] and name = "my-study"'
+        )
     if not isinstance(name, str) or not _NAME.match(name):
         raise InputDataError(
             f"{where}: [study] name must be 1–64 letters, digits, '_', '.' or '-', got {name!r}"

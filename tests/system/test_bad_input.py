@@ -203,6 +203,9 @@ CASES = [
     ("diagnose-storage-unknown-scheme", {}, ["diagnose", "webbing.toml", "--storage", "foo://x"]),
     ("compare-storage-unknown-scheme", {}, ["compare", "webbing.toml", "--storage", "foo://x"]),
     ("compare-nothing-calibrated", {}, ["compare", "webbing.toml"]),  # no empty storage left
+    ("study-empty", {"empty.toml": ""}, ["run", "empty.toml"]),
+    ("study-is-a-folder", {}, ["run", "{d}"]),
+    ("samples-is-a-folder", {}, ["fit", "{d}"]),
     ("effect-known-run", {"hard.toml": STUDY + HARDENING}, ["run", "hard.toml"]),
     (
         "effect-known-doe-run",
@@ -210,6 +213,22 @@ CASES = [
         ["doe", "--study", "hard.toml", "--run", "--n", "2", "--out", "x.csv"],
     ),
 ]
+
+# what the one line must say, where a case's message was once a bare OS error or a
+# finding made only after the work
+SAYS = {
+    "study-empty": "no [study] name; a study file starts with [study]",
+    "study-is-a-folder": "is a folder; name a file in it",
+    "samples-is-a-folder": "is a folder; name a file in it",
+    "calibrate-budget-below-design": "--budget 10 is too small for this calibration: it "
+    "needs at least 12 solver runs (an initial design of 8 and one verification at the 4 "
+    "condition groups)",
+    "calibrate-study-budget-below-design": "[budget] calibration_solver_calls 11 is too small",
+    "calibrate-storage-unknown-scheme": "unknown scheme 'foo'",
+    "calibrate-storage-folder-missing": "does not exist; create it first",
+    "compare-storage-unknown-scheme": "unknown scheme 'foo'",
+    "compare-nothing-calibrated": "run `surrogate calibrate` first or give --params",
+}
 
 
 @pytest.fixture(scope="module")
@@ -241,7 +260,7 @@ def _hashes(folder: Path) -> dict[str, str]:
 
 @pytest.mark.parametrize(("files", "argv"), [c[1:] for c in CASES], ids=[c[0] for c in CASES])
 def test_bad_input_is_one_line_exit_2_and_nothing_changes(
-    files, argv, project, tmp_path, monkeypatch, capsys
+    files, argv, project, tmp_path, monkeypatch, capsys, request
 ):
     folder = tmp_path / "project"
     shutil.copytree(project, folder)
@@ -257,9 +276,11 @@ def test_bad_input_is_one_line_exit_2_and_nothing_changes(
     assert stop.value.code == 2, err
     assert len(err.strip().splitlines()) == 1, err
     assert err.startswith("surrogate: error:") or err.startswith("surrogate "), err
+    assert SAYS.get(request.node.callspec.id, "") in err
     assert _hashes(folder) == before
 
 
 def test_there_are_at_least_25_cases():
     assert len(CASES) >= 25
     assert len({c[0] for c in CASES}) == len(CASES)
+    assert set(SAYS) <= {c[0] for c in CASES}
