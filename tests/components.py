@@ -8,12 +8,16 @@ from __future__ import annotations
 
 import contextlib
 import glob
+import json
 import os
 import pwd
 import shutil
 import socket
 import subprocess
+import sys
 import tempfile
+import time
+import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -123,3 +127,61 @@ def create_database(server_url: str, name: str) -> str:
     with psycopg.connect(f"{server_url}/postgres", autocommit=True) as connection:
         connection.execute(f'CREATE DATABASE "{name}"')
     return f"{server_url}/{name}"
+
+
+class Dashboard:
+    """``surrogate dashboard STUDY [--storage URL] --port P`` in a subprocess, and its
+    JSON API (a context manager: the server is stopped at the end)."""
+
+    def __init__(self, study: str | os.PathLike[str], storage: str | None = None) -> None:
+        self.port = free_port()
+        where = ["--storage", storage] if storage else []
+        self.server = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "surrogate",
+                "dashboard",
+                str(study),
+                *where,
+                "--port",
+                str(self.port),
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+
+    def __enter__(self) -> Dashboard:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.server.terminate()
+        self.server.wait(timeout=10)
+
+    def studies(self) -> list[dict]:
+        """The study summaries, once the server answers: up to 180 s while it runs (its
+        start is imports, slow on a loaded machine; 15 s failed with two suites on two
+        cores), at once with its stderr if it ended."""
+        deadline = time.monotonic() + 180.0
+        while time.monotonic() < deadline:
+            try:
+                return self.get("/api/studies")["study_summaries"]
+            except OSError:
+                if self.server.poll() is not None:  # it ended: no point waiting
+                    break
+                time.sleep(0.25)
+        ended = self.server.poll()
+        raise AssertionError(
+            f"the dashboard did not answer on 127.0.0.1 (exit code {ended}; "
+            f"{self.server.stderr.read() if ended is not None else 'still running'})"
+        )
+
+    def detail(self, study_name: str) -> dict:
+        """The dashboard's view of one study (trials, figures, note)."""
+        study_id = next(s["study_id"] for s in self.studies() if s["study_name"] == study_name)
+        return self.get(f"/api/studies/{study_id}?after=0")
+
+    def get(self, path: str) -> dict:
+        with urllib.request.urlopen(f"http://127.0.0.1:{self.port}{path}", timeout=5) as r:
+            return json.load(r)

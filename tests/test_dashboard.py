@@ -3,76 +3,25 @@
 (The headless-browser check of the page is a separate, later test.)
 """
 
-import json
 import shutil
-import socket
 import subprocess
 import sys
-import time
-import urllib.request
 from pathlib import Path
 
 import pytest
 
 from surrogate.identify._loop import run
+from tests.components import Dashboard
 
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 pytestmark = pytest.mark.slow
-
-
-def _free_port():
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
-class _Dashboard:
-    """``surrogate dashboard STUDY --port P`` in a subprocess, and its JSON API."""
-
-    def __init__(self, study):
-        self.port = _free_port()
-        self.server = subprocess.Popen(
-            [sys.executable, "-m", "surrogate", "dashboard", str(study), "--port", str(self.port)],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.server.terminate()
-        self.server.wait(timeout=10)
-
-    def detail(self, study_name):
-        """The dashboard's view of one study (trials, figures, note)."""
-        summaries = None
-        deadline = time.monotonic() + 180.0  # its start is imports: slow on a loaded machine
-        while summaries is None and time.monotonic() < deadline:
-            try:
-                summaries = self._get("/api/studies")["study_summaries"]
-            except OSError:
-                if self.server.poll() is not None:  # it ended: no point waiting
-                    break
-                time.sleep(0.25)
-        assert summaries, (
-            f"the dashboard did not answer on 127.0.0.1 (exit code {self.server.poll()}; "
-            f"{self.server.stderr.read() if self.server.poll() is not None else 'still running'})"
-        )
-        study_id = next(s["study_id"] for s in summaries if s["study_name"] == study_name)
-        return self._get(f"/api/studies/{study_id}?after=0")
-
-    def _get(self, path):
-        with urllib.request.urlopen(f"http://127.0.0.1:{self.port}{path}", timeout=5) as r:
-            return json.load(r)
 
 
 def test_dashboard_serves_the_verify_study_with_our_figure_and_note(tmp_path):
     study = tmp_path / "paper_coating.toml"
     shutil.copy(STUDIES / "paper_coating.toml", study)
     result = run(study, progress=False, budget=8)
-    with _Dashboard(study) as dashboard:
+    with Dashboard(study) as dashboard:
         detail = dashboard.detail(result.study)
         assert len(detail["trials"]) == result.solver_calls
         assert [g["id"] for g in detail["plotly_graph_objects"]] == ["verified-curves"]
@@ -92,7 +41,7 @@ def test_dashboard_shows_what_a_calibration_determined(tmp_path):
     study = write_calibration_study(tmp_path, case)
     result = calibrate(study, progress=False)
     assert result.status == "converged", result.message
-    with _Dashboard(study) as dashboard:
+    with Dashboard(study) as dashboard:
         detail = dashboard.detail(result.study)
     note = detail["note"]["body"]
     assert "## Calibration: converged" in note

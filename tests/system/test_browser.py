@@ -8,13 +8,9 @@ verified trial, our plotly figure of the verified curves and our note.
 
 from __future__ import annotations
 
-import json
 import shutil
 import subprocess
-import sys
 import tempfile
-import time
-import urllib.request
 from pathlib import Path
 
 import optuna
@@ -22,7 +18,7 @@ import pytest
 
 from surrogate.identify._loop import run
 from surrogate.storage._storage import open_storage
-from tests.components import free_port
+from tests.components import Dashboard
 
 REPO = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.slow
@@ -68,30 +64,9 @@ def finished_study(tmp_path_factory):
 @pytest.fixture(scope="module")
 def dashboard_url(finished_study):
     study, storage, _ = finished_study
-    port = free_port()
-    server = subprocess.Popen(
-        [
-            *(sys.executable, "-m", "surrogate", "dashboard", str(study)),
-            *("--storage", storage, "--port", str(port)),
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        for _ in range(120):
-            try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/studies", timeout=2) as r:
-                    summaries = json.load(r)["study_summaries"]
-                break
-            except OSError:
-                time.sleep(0.25)
-        else:
-            pytest.fail(f"the dashboard did not answer: {server.stderr.read()}")
-        yield f"http://127.0.0.1:{port}/dashboard/studies/{summaries[0]['study_id']}"
-    finally:
-        server.terminate()
-        server.wait(timeout=10)
+    with Dashboard(study, storage) as dashboard:
+        summaries = dashboard.studies()
+        yield f"http://127.0.0.1:{dashboard.port}/dashboard/studies/{summaries[0]['study_id']}"
 
 
 def test_the_run_with_two_local_workers_verified(finished_study):
