@@ -1,4 +1,5 @@
-"""``surrogate simulate`` as a user runs it: a real subprocess."""
+"""``surrogate simulate`` as a user runs it: a real subprocess (its refusals in this
+process, ``in_process``)."""
 
 import json
 import subprocess
@@ -90,13 +91,13 @@ def test_rig_options_reach_the_solver():
         (["--scoat", "0.2", "--tcoat", "0.012"], "required: --ecoat"),
     ],
 )
-def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, fragment):
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, fragment, in_process):
     out = tmp_path / "curve.csv"
-    result = _run("simulate", *args, "--out", str(out))
-    assert result.returncode == 2
-    assert result.stdout == ""
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1, result.stderr
+    code, stdout, stderr = in_process("simulate", *args, "--out", str(out))
+    assert code == 2
+    assert stdout == ""
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1, stderr
     assert fragment in lines[0]
-    assert "Traceback" not in result.stderr
+    assert "Traceback" not in stderr
     assert list(tmp_path.iterdir()) == []  # nothing written, not even a temp file

@@ -121,15 +121,17 @@ BAD_POINTS = {
 
 
 @pytest.mark.parametrize("kind", sorted(BAD_POINTS))
-def test_bad_points_file_is_refused_and_nothing_written(workdir, fitted, kind, tmp_path):
+def test_bad_points_file_is_refused_and_nothing_written(
+    workdir, fitted, kind, tmp_path, in_process
+):
     bad = tmp_path / "bad.csv"
     bad.write_text(BAD_POINTS[kind])
     (tmp_path / "model.json").write_bytes((workdir / "model.json").read_bytes())
     before = _snapshot(tmp_path)
-    result = _run("predict", "model.json", "bad.csv", "--out", "pred.csv", cwd=tmp_path)
-    assert result.returncode == 2
-    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
-    assert "Traceback" not in result.stderr
+    code, _, err = in_process("predict", "model.json", "bad.csv", "--out", "pred.csv", cwd=tmp_path)
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1, err
+    assert "Traceback" not in err
     assert _snapshot(tmp_path) == before
 
 
@@ -142,25 +144,25 @@ BAD_SAMPLES = {
 
 
 @pytest.mark.parametrize("kind", sorted(BAD_SAMPLES))
-def test_bad_sample_file_is_refused_and_nothing_written(workdir, kind, tmp_path):
+def test_bad_sample_file_is_refused_and_nothing_written(workdir, kind, tmp_path, in_process):
     table = BAD_SAMPLES[kind](pd.read_csv(workdir / "samples.csv"))
     table.to_csv(tmp_path / "samples.csv", index=False)
     before = _snapshot(tmp_path)
-    result = _run("fit", "samples.csv", "--out", "model.json", cwd=tmp_path)
-    assert result.returncode == 2, result.stdout
-    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    code, out, err = in_process("fit", "samples.csv", "--out", "model.json", cwd=tmp_path)
+    assert code == 2, out
+    assert len(err.strip().splitlines()) == 1, err
     assert _snapshot(tmp_path) == before
 
 
-def test_bad_design_request_writes_nothing(tmp_path):
+def test_bad_design_request_writes_nothing(tmp_path, in_process):
     for args in (
         ["--design", "lhs", "--n", "0"],
         ["--design", "grid"],
         ["--design", "lhs", "--jobs", "0", "--run"],
     ):
-        result = _run("doe", *args, "--out", "x.csv", cwd=tmp_path)
-        assert result.returncode == 2, (args, result.stderr)
-        assert len(result.stderr.strip().splitlines()) == 1
+        code, _, err = in_process("doe", *args, "--out", "x.csv", cwd=tmp_path)
+        assert code == 2, (args, err)
+        assert len(err.strip().splitlines()) == 1
     assert list(tmp_path.iterdir()) == []
 
 
@@ -171,13 +173,15 @@ BAD_DESIGNS = {
 
 
 @pytest.mark.parametrize("kind", sorted(BAD_DESIGNS))
-def test_bad_design_file_is_refused_and_nothing_written(kind, tmp_path):
+def test_bad_design_file_is_refused_and_nothing_written(kind, tmp_path, in_process):
     (tmp_path / "design.csv").write_text(BAD_DESIGNS[kind])
     before = _snapshot(tmp_path)
-    result = _run("doe", "--from", "design.csv", "--run", "--out", "samples.csv", cwd=tmp_path)
-    assert result.returncode == 2
-    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
-    assert "Traceback" not in result.stderr
+    code, _, err = in_process(
+        "doe", "--from", "design.csv", "--run", "--out", "samples.csv", cwd=tmp_path
+    )
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1, err
+    assert "Traceback" not in err
     assert _snapshot(tmp_path) == before  # no sample set, no cache entry
 
 
