@@ -158,7 +158,7 @@ def journal_path(url: str) -> Path | None:
 
 
 def local_storage_file(url: str) -> Path | None:
-    """The SQLite or journal file of ``url``; None for a server (or an in-memory SQLite)."""
+    """The SQLite or journal file of ``url``; None for a server (or ``sqlite://``, in memory)."""
     url = normalise_storage_url(url)
     local = journal_path(url)
     if url.startswith("sqlite:///"):
