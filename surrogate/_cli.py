@@ -869,7 +869,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SolverError as error:
         _fail(f"solver error: {error}", EXIT_SOLVER)
     except IsADirectoryError as error:
-        _fail(f"error: {error.filename} is a folder; name a file in it", EXIT_USAGE)
+        folder = error.filename2 or error.filename or error  # os.replace: the target's
+        _fail(f"error: {folder} is a folder; name a file in it", EXIT_USAGE)
     except OSError as error:
         _fail(f"error: {error.strerror or error}: {error.filename}", EXIT_USAGE)
     except Exception as error:

@@ -12,6 +12,8 @@ import pytest
 
 import surrogate
 from surrogate._cli import main
+from surrogate._errors import InputDataError
+from surrogate.calibration._calibrate import run_calibration
 from surrogate.calibration._synthetic import synthetic_measurements
 from surrogate.physics import bending_stiffness, plastic_moment
 from tests.studies import write_study
@@ -336,3 +338,18 @@ def test_the_surrogate_search_finds_the_surrogates_best_and_chunks_change_nothin
     again, predicted_again = loop._search(model, 300)
     np.testing.assert_array_equal(again, theta)
     assert predicted_again == predicted
+
+
+@pytest.mark.slow
+def test_a_budget_below_the_design_refuses_a_calibration_not_a_diagnosis_recalibration(tmp_path):
+    """Three parameters at two condition groups need 8 + 2 runs, with ``tension`` 12 + 2:
+    a budget of 10 is refused for the calibration a user asks for (before any run, where
+    it used to overshoot it); a diagnosis's recalibration of that candidate, which is
+    not recorded, gets its initial design and one verification, as the model it is
+    ranked against had."""
+    path = _study(tmp_path, BASE_TESTS, budget=10)
+    with pytest.raises(InputDataError, match="needs at least 14 solver runs"):
+        surrogate.calibrate(path, effects=["tension"], progress=False)
+    found, loop = run_calibration(path, effects=["tension"], progress=False, record=False)
+    assert loop.budget == 14
+    assert 14 - 2 < found.solver_calls <= 14  # the design and at most one verification

@@ -233,12 +233,16 @@ def run_calibration(
             problem, runs, noise=noise, budget=LOW_FIDELITY_BUDGET, progress=progress, label=name
         )
     smallest, made_of = loop.smallest_budget()
-    if expensive and budget < smallest:  # refused before any run, not overshot
-        where = "--budget" if max_solver_calls else "[budget] calibration_solver_calls"
-        raise InputDataError(
-            f"{where} {budget} is too small for this calibration: it needs at least "
-            f"{smallest} solver runs ({made_of}); raise it"
-        )
+    if expensive and budget < smallest:
+        if record:  # the user's calibration: refused before any run, not overshot
+            where = "--budget" if max_solver_calls else "[budget] calibration_solver_calls"
+            raise InputDataError(
+                f"{where} {budget} is too small for this calibration: it needs at least "
+                f"{smallest} solver runs ({made_of}); raise it"
+            )
+        # a diagnosis's recalibration with a candidate's extra parameters: its initial
+        # design and one verification, as the model it is ranked against had
+        loop.budget = smallest
     loop.run(spec.budget.surrogate_trials)
     result = _result(loop, chosen, url)
     if record and expensive:

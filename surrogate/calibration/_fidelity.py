@@ -198,7 +198,10 @@ class CorrectedCalibration(CalibrationLoop):
         """One verification by the expensive solver (a run at every condition group): at
         the corrected model's optimum."""
         G = len(self.problem.groups)
-        return G, f"one verification by the expensive solver: a run at each of {G} conditions"
+        return (
+            G,
+            f"one verification by the expensive solver: a run at each of the {G} condition groups",
+        )
 
     # -- the runs -------------------------------------------------------------------------------
     def corrected_runs(self, correction: CurveCorrection | None) -> CorrectedRuns:

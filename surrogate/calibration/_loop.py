@@ -421,8 +421,9 @@ class CalibrationLoop:
         turn (no more than the budget has left: a loop that takes over late)."""
         problem = self.problem
         d, G = len(problem.space), len(problem.groups)
-        n0 = min(self.design_size(), max(0, self.budget - self.runs.calls))
-        if n0 == 0:
+        # a design only where a verification can follow it
+        n0 = min(self.design_size(), self.budget - self.runs.calls - G)
+        if n0 < 1:
             return
         unit = qmc.LatinHypercube(d=d, seed=self.seed).random(n0)
         thetas = problem.space.from_unit(unit)

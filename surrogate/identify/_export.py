@@ -338,11 +338,11 @@ def _load(spec: StudySpec, url: str, suffix: str, command: str) -> tuple[Any, st
     import optuna
 
     from ..storage._optuna import quiet_optuna
-    from ..storage._storage import open_storage
+    from ..storage._storage import missing_local_storage, open_storage
 
     quiet_optuna()
     name = f"{spec.name}/{suffix}"
-    if url.startswith("sqlite:///") and not Path(url.removeprefix("sqlite:///")).exists():
+    if missing_local_storage(url) is not None:  # a journal would be created, not read
         raise InputDataError(f"storage {url} does not exist; run `{command}` first")
     try:
         return optuna.load_study(study_name=name, storage=open_storage(url)), name

@@ -180,10 +180,10 @@ def check_storage_url(url: str) -> str:
     local = local_storage_file(normalised)
     if local is not None and not local.parent.is_dir():
         raise InputDataError(
-            f"--storage {url}: folder {local.parent} does not exist; create it first"
+            f"storage {url}: folder {local.parent} does not exist; create it first"
         )
     if local is not None and local.is_dir():
-        raise InputDataError(f"--storage {url}: {local} is a folder; name the file to use")
+        raise InputDataError(f"storage {url}: {local} is a folder; name the file to use")
     return normalised
 
 
