@@ -25,7 +25,12 @@ def check_output_file(path: str | os.PathLike[str]) -> Path:
     target = Path(path)
     if target.is_dir():
         raise InputDataError(f"{target} is a folder; name the file to write")
-    folder = target.parent  # "." for a bare file name
+    _check_writable_folder(target.parent)  # "." for a bare file name
+    return target
+
+
+def _check_writable_folder(folder: Path) -> None:
+    """The one rule for where an output goes: a folder that exists and can be written."""
     if not folder.is_dir():
         state = (
             "is a file; choose another" if folder.exists() else "does not exist; create it first"
@@ -33,7 +38,6 @@ def check_output_file(path: str | os.PathLike[str]) -> Path:
         raise InputDataError(f"output folder {folder} {state}")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise InputDataError(f"output folder {folder} is not writable; choose another")
-    return target
 
 
 def check_output_folder(path: str | os.PathLike[str]) -> Path:
@@ -42,9 +46,7 @@ def check_output_folder(path: str | os.PathLike[str]) -> Path:
     target = Path(path)
     if target.exists() and not target.is_dir():
         raise InputDataError(f"{target} is a file; name a folder to write the figures into")
-    parent = target.parent
-    if not target.exists() and not parent.is_dir():
-        raise InputDataError(f"output folder {parent} does not exist; create it first")
+    _check_writable_folder(target if target.exists() else target.parent)
     return target
 
 

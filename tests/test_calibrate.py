@@ -16,6 +16,7 @@ from surrogate._errors import InputDataError
 from surrogate.calibration._calibrate import run_calibration
 from surrogate.calibration._synthetic import synthetic_measurements
 from surrogate.physics import bending_stiffness, plastic_moment
+from surrogate.storage._storage import open_storage
 from tests.studies import write_study
 
 TRUTH = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
@@ -353,3 +354,13 @@ def test_a_budget_below_the_design_refuses_a_calibration_not_a_diagnosis_recalib
     found, loop = run_calibration(path, effects=["tension"], progress=False, record=False)
     assert loop.budget == 14
     assert 14 - 2 < found.solver_calls <= 14  # the design and at most one verification
+
+
+def test_compare_records_its_figures_in_a_journal_storage(tmp_path):
+    """compare opened its storage URL with SQLAlchemy directly: a journal (a ``.log``
+    path) failed after the work with "Could not parse SQLAlchemy URL"."""
+    path = _study(tmp_path, BASE_TESTS[:2])
+    journal = tmp_path / "studies.log"
+    found = surrogate.compare(path, params=TRUTH, plots=False, progress=False, storage=str(journal))
+    study = optuna.load_study(study_name=found.study, storage=open_storage(str(journal)))
+    assert study.study_name.endswith("/calibrate/base")

@@ -475,7 +475,9 @@ def _attach(found: Comparison, result: CompareResult) -> None:
     except ImportError:
         return
     quiet_optuna()
-    study = optuna.create_study(study_name=result.study, storage=found.storage, load_if_exists=True)
+    study = optuna.create_study(
+        study_name=result.study, storage=open_storage(found.storage), load_if_exists=True
+    )
     for graph_id, figure in figures.items():
         save_plotly_graph_object(study, figure, graph_object_id=graph_id)
     save_note(study, "\n".join(_note_lines(result.tests, result, found.stored)))
