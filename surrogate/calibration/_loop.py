@@ -418,10 +418,10 @@ class CalibrationLoop:
 
     def _initial_design(self) -> None:
         """A Latin hypercube of :meth:`design_size` points, each at one condition group in
-        turn (no more than the budget has left: a loop that takes over late)."""
+        turn — no more than leaves one verification within the budget, and none where
+        not even that fits (a loop that takes over late)."""
         problem = self.problem
         d, G = len(problem.space), len(problem.groups)
-        # a design only where a verification can follow it
         n0 = min(self.design_size(), self.budget - self.runs.calls - G)
         if n0 < 1:
             return

@@ -174,8 +174,9 @@ def missing_local_storage(url: str) -> Path | None:
 
 def check_storage_url(url: str) -> str:
     """``url`` normalised, refused (InputDataError) where it cannot name a storage: an
-    unknown scheme, or a SQLite or journal file in a folder that does not exist. Cheap
-    and creates nothing: a command checks it before its work, not after."""
+    unknown scheme, or a SQLite or journal file in a folder that does not exist or that
+    is itself a folder. Cheap and creates nothing: a command checks it before its work,
+    not after."""
     normalised = normalise_storage_url(url)
     local = local_storage_file(normalised)
     if local is not None and not local.parent.is_dir():
