@@ -67,7 +67,17 @@ class ModelState:
     clamp_stiffness_nmm: float | None = None
 
     def replace(self, **changes: Any) -> ModelState:
-        return dataclasses.replace(self, **changes)
+        """A copy with some fields changed: ``dataclasses.replace``'s result, without its
+        ``__init__`` of every field (a calibration's search replaces ~10⁶ states)."""
+        if type(self) is not ModelState or not changes.keys() <= _STATE_FIELDS:
+            return dataclasses.replace(self, **changes)  # a subclass; its TypeError
+        copy = object.__new__(ModelState)
+        copy.__dict__.update(self.__dict__)
+        copy.__dict__.update(changes)
+        return copy
+
+
+_STATE_FIELDS = frozenset(field.name for field in dataclasses.fields(ModelState))
 
 
 class Effect:
@@ -86,7 +96,7 @@ class Effect:
     # -- shared validation ---------------------------------------------------------------------
     def resolve(self, values: Mapping[str, float] | None) -> dict[str, float]:
         """Full parameter values (missing ones at "off"), validated against the bounds."""
-        values = dict(values or {})
+        values = values or {}
         names = [p.name for p in self.parameters]
         unknown = [k for k in values if k not in names]
         if unknown:
@@ -131,8 +141,8 @@ def register_effect(effect: Effect | type[Effect]) -> Effect:
 
 
 def get_effect(name: str) -> Effect:
-    from . import _builtin  # noqa: F401  (registers the built-ins)
-
+    if not _BUILTINS_LOADED:
+        _load_builtins()
     if name not in _REGISTRY:
         raise InputDataError(
             f"unknown effect {name!r}; available: "
@@ -154,9 +164,21 @@ def check_effects(names: Iterable[str], plugins: Iterable[str] = ()) -> tuple[st
 
 
 def available_effects() -> list[str]:
+    if not _BUILTINS_LOADED:
+        _load_builtins()
+    return sorted(_REGISTRY)
+
+
+_BUILTINS_LOADED = False
+
+
+def _load_builtins() -> None:
+    """Register the built-in effects, once (an import statement each call cost a
+    calibration's search as much as the effects themselves)."""
+    global _BUILTINS_LOADED
     from . import _builtin  # noqa: F401
 
-    return sorted(_REGISTRY)
+    _BUILTINS_LOADED = True
 
 
 def load_plugin(module: str) -> None:

@@ -91,14 +91,25 @@ class Regressor(GaussianProcessRegressor):
         if fast is None:
             check_is_fitted(self, "alpha_")  # not the prior's mean, as predict would give
         if fast:
-            kernel = self.kernel_
-            matern = kernel.k1.k2
-            length_scale = np.squeeze(matern.length_scale).astype(float)
-            dists = cdist(X / length_scale, self.X_train_ / length_scale, metric="euclidean")
-            K_trans = _matern(dists, matern.nu) * kernel.k1.k1.constant_value  # White: 0 here
+            length_scale, train, nu, constant = self._mean_terms()
+            dists = cdist(X / length_scale, train, metric="euclidean")
+            K_trans = _matern(dists, nu) * constant  # White: 0 here
         else:
             K_trans = self.kernel_(X, self.X_train_)
         return self._y_train_std * (K_trans @ self.alpha_) + self._y_train_mean
+
+    def _mean_terms(self) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """The fitted kernel's length scales, the scaled training inputs, ν and the constant
+        of :meth:`posterior_mean` (Matern's ``__call__`` divides both inputs by the length
+        scales each call), kept while ``kernel_`` and ``X_train_`` are these objects."""
+        kernel, train = self.kernel_, self.X_train_
+        terms = getattr(self, "_terms", None)
+        if terms is None or terms[0] is not kernel or terms[1] is not train:
+            matern = kernel.k1.k2
+            length_scale = np.squeeze(matern.length_scale).astype(float)
+            scaled = (length_scale, train / length_scale, matern.nu, kernel.k1.k1.constant_value)
+            terms = self._terms = (kernel, train, scaled)
+        return terms[2]
 
     def log_marginal_likelihood(self, theta=None, eval_gradient=False, clone_kernel=True):
         fast = self._searching or (clone_kernel and getattr(self, "fast_likelihood_", False))
