@@ -174,7 +174,7 @@ _BUILTINS_LOADED = False
 
 def _load_builtins() -> None:
     """Register the built-in effects, once (an import statement each call cost a
-    calibration's search as much as the effects themselves)."""
+    calibration's search about as much as the effects themselves did)."""
     global _BUILTINS_LOADED
     from . import _builtin  # noqa: F401
 

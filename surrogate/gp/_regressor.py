@@ -101,15 +101,16 @@ class Regressor(GaussianProcessRegressor):
     def _mean_terms(self) -> tuple[np.ndarray, np.ndarray, float, float]:
         """The fitted kernel's length scales, the scaled training inputs, ν and the constant
         of :meth:`posterior_mean` (Matern's ``__call__`` divides both inputs by the length
-        scales each call), kept while ``kernel_`` and ``X_train_`` are these objects."""
-        kernel, train = self.kernel_, self.X_train_
+        scales each call), kept while the training inputs and these hyperparameters are the
+        same objects (setting ``theta`` replaces them)."""
+        matern, constant = self.kernel_.k1.k2, self.kernel_.k1.k1.constant_value
+        key = (self.X_train_, matern.length_scale, matern.nu, constant)
         terms = getattr(self, "_terms", None)
-        if terms is None or terms[0] is not kernel or terms[1] is not train:
-            matern = kernel.k1.k2
+        if terms is None or any(a is not b for a, b in zip(terms[0], key, strict=True)):
             length_scale = np.squeeze(matern.length_scale).astype(float)
-            scaled = (length_scale, train / length_scale, matern.nu, kernel.k1.k1.constant_value)
-            terms = self._terms = (kernel, train, scaled)
-        return terms[2]
+            scaled = (length_scale, self.X_train_ / length_scale, matern.nu, constant)
+            terms = self._terms = (key, scaled)
+        return terms[1]
 
     def log_marginal_likelihood(self, theta=None, eval_gradient=False, clone_kernel=True):
         fast = self._searching or (clone_kernel and getattr(self, "fast_likelihood_", False))

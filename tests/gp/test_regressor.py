@@ -97,6 +97,24 @@ def test_the_posterior_mean_is_predicts_bit_for_bit(nu, d, monkeypatch):
     np.testing.assert_array_equal(mean, expected)
 
 
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+def test_the_posterior_mean_follows_a_refit_and_a_new_theta():
+    """:meth:`Regressor.posterior_mean` keeps its scaled training inputs between calls;
+    a refit on other runs, or ``theta`` set on the fitted kernel, is ``predict``'s still."""
+    rng = np.random.default_rng(5)
+    X, y = _data(rng, 20, 3, duplicate=False)
+    Z = rng.uniform(0.0, 1.0, (8, 3))
+    gp = Regressor(kernel=_kernel(3, 2.5, rng), normalize_y=True, random_state=0).fit(X, y)
+    first = gp.posterior_mean(Z)
+    np.testing.assert_array_equal(first, gp.predict(Z))
+    gp.kernel_.theta = gp.kernel_.theta + 0.3
+    np.testing.assert_array_equal(gp.posterior_mean(Z), gp.predict(Z))
+    assert not np.array_equal(gp.posterior_mean(Z), first)
+    X2, y2 = _data(rng, 25, 3, duplicate=False)
+    gp.fit(X2, y2)
+    np.testing.assert_array_equal(gp.posterior_mean(Z), gp.predict(Z))
+
+
 def _count_matern_calls(monkeypatch):
     """Patch ``Matern.__call__`` to count its calls in the returned one-item list."""
     calls = [0]
