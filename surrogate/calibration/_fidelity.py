@@ -198,10 +198,8 @@ class CorrectedCalibration(CalibrationLoop):
         """One verification by the expensive solver (a run at every condition group): at
         the corrected model's optimum."""
         G = len(self.problem.groups)
-        return (
-            G,
-            f"one verification by the expensive solver: a run at each of the {G} condition groups",
-        )
+        groups = f"each of the {G} condition groups" if G != 1 else "the one condition group"
+        return G, f"one verification by the expensive solver: a run at {groups}"
 
     # -- the runs -------------------------------------------------------------------------------
     def corrected_runs(self, correction: CurveCorrection | None) -> CorrectedRuns:

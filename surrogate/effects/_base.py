@@ -141,14 +141,13 @@ def register_effect(effect: Effect | type[Effect]) -> Effect:
 
 
 def get_effect(name: str) -> Effect:
-    if not _BUILTINS_LOADED:
-        _load_builtins()
-    if name not in _REGISTRY:
+    registry = _registry()
+    if name not in registry:
         raise InputDataError(
             f"unknown effect {name!r}; available: "
-            f"{', '.join(sorted(_REGISTRY))} (or load a plug-in with --plugin)"
+            f"{', '.join(sorted(registry))} (or load a plug-in with --plugin)"
         )
-    return _REGISTRY[name]
+    return registry[name]
 
 
 def check_effects(names: Iterable[str], plugins: Iterable[str] = ()) -> tuple[str, ...]:
@@ -164,21 +163,22 @@ def check_effects(names: Iterable[str], plugins: Iterable[str] = ()) -> tuple[st
 
 
 def available_effects() -> list[str]:
-    if not _BUILTINS_LOADED:
-        _load_builtins()
-    return sorted(_REGISTRY)
+    return sorted(_registry())
 
 
 _BUILTINS_LOADED = False
 
 
-def _load_builtins() -> None:
-    """Register the built-in effects, once (an import statement each call cost a
-    calibration's search about as much as the effects themselves did)."""
+def _registry() -> dict[str, Effect]:
+    """The registered effects, the built-ins among them: imported on the first call only
+    (an import statement each call cost a calibration's search about as much as the
+    effects themselves did)."""
     global _BUILTINS_LOADED
-    from . import _builtin  # noqa: F401
+    if not _BUILTINS_LOADED:
+        from . import _builtin  # noqa: F401
 
-    _BUILTINS_LOADED = True
+        _BUILTINS_LOADED = True
+    return _REGISTRY
 
 
 def load_plugin(module: str) -> None:
