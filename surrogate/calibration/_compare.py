@@ -209,13 +209,13 @@ def _model_curves(problem: CalibrationProblem, theta: np.ndarray, *, solve: bool
     """The full solver's curves (G, A) at ``theta`` for every condition group (``solve``
     False: from the result cache only)."""
     runs = SolverRuns(problem, problem.spec.directory / ".solver-cache", jobs=1)
-    G = len(problem.groups)
-    thetas, groups = np.repeat(theta[None, :], G, axis=0), list(range(G))
+    thetas, groups = problem.at_every_group(theta)
     absent = [] if solve else [k for k in runs.keys(thetas, groups) if k not in runs.cache]
     if absent:
         raise InputDataError(
-            f"{len(absent)} of its {G} full-solver runs ({problem.spec.solver}) are not in the "
-            f"result cache {runs.cache.directory}; make them with `surrogate compare`"
+            f"{len(absent)} of its {len(thetas)} full-solver runs ({problem.spec.solver}) "
+            f"are not in the result cache {runs.cache.directory}; "
+            "make them with `surrogate compare`"
         )
     out = runs.run(thetas, groups)
     done = [o for o in out if o is not None]

@@ -197,9 +197,10 @@ class CorrectedCalibration(CalibrationLoop):
     def smallest_budget(self) -> tuple[int, str]:
         """One verification by the expensive solver (a run at every condition group): at
         the corrected model's optimum."""
-        G = len(self.problem.groups)
-        groups = f"each of the {G} condition groups" if G != 1 else "the one condition group"
-        return G, f"one verification by the expensive solver: a run at {groups}"
+        return (
+            self.problem.runs_per_point,
+            f"one verification by the expensive solver: {self.problem.one_verification()}",
+        )
 
     # -- the runs -------------------------------------------------------------------------------
     def corrected_runs(self, correction: CurveCorrection | None) -> CorrectedRuns:
@@ -390,8 +391,7 @@ class CorrectedCalibration(CalibrationLoop):
         finally:
             self._counted(model.runs)
         self.iterations += 1
-        G = len(self.problem.groups)
-        keys = set(self.runs.keys(np.repeat(fit.theta[None, :], G, axis=0), range(G)))
+        keys = set(self.runs.keys(*self.problem.at_every_group(fit.theta)))
         if any(keys == set(point.keys) for point in self.verified):
             return None
         step = _step(model, fit.theta, best)
@@ -502,7 +502,7 @@ class CorrectedCalibration(CalibrationLoop):
         left = self.verifications_left()
         if left >= needed or self.short is not None:
             return left >= needed
-        G = len(self.problem.groups)
+        G = self.problem.runs_per_point
         self.short = (
             f"{left * G} expensive run(s) left, short of the {needed * G} of the expensive "
             "solver's first-order test's Jacobian"
@@ -542,9 +542,9 @@ class CorrectedCalibration(CalibrationLoop):
     def _predicted(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """The corrected model's curves (G, A) and their standard deviations at ``theta``
         before it is verified, and the RMSE they predict."""
-        G = len(self.problem.groups)
+        G = self.problem.runs_per_point
         low = self.corrected_runs(None)
-        out = low.run(np.repeat(theta[None, :], G, axis=0), list(range(G)))
+        out = low.run(*self.problem.at_every_group(theta))
         self._counted(low)
         names = self.problem.space.names
         curves, stds = [], []
@@ -561,14 +561,13 @@ class CorrectedCalibration(CalibrationLoop):
     def _learn(self, theta: np.ndarray, curves: np.ndarray) -> list[dict[str, Any] | None]:
         """Teach the correction the expensive runs at ``theta``, curves (G, A); the built-in
         results of the same runs."""
-        G = len(self.problem.groups)
         names = self.problem.space.names
         plain = self.corrected_runs(None)
-        thetas = np.repeat(theta[None, :], G, axis=0)
-        lows = plain.run(thetas, list(range(G)))
+        thetas, groups = self.problem.at_every_group(theta)
+        lows = plain.run(thetas, groups)
         self._counted(plain)
         results = []
-        for g, (low, key) in enumerate(zip(lows, plain.keys(thetas, range(G)), strict=True)):
+        for g, (low, key) in enumerate(zip(lows, plain.keys(thetas, groups), strict=True)):
             if low is None:
                 continue
             inputs = self.problem.inputs(dict(zip(names, theta, strict=True)), g)

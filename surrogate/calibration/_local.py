@@ -154,7 +154,6 @@ class ResidualModel:
 
     def __init__(self, problem: Any, runs: Any, *, budget: int | None = None) -> None:
         self.problem, self.runs, self.budget = problem, runs, budget
-        self.groups = len(problem.groups)
         self.fd_step = FD_STEP_UNIT
         self.coordinates = FitCoordinates(problem.space, problem.spec.rig.thickness_mm)
         self._memo: dict[bytes, tuple[np.ndarray, np.ndarray | None]] = {}
@@ -186,11 +185,11 @@ class ResidualModel:
 
     def _at(self, x: np.ndarray) -> tuple[np.ndarray, list[int]]:
         """The runs of one evaluation: the point at every condition group."""
-        return np.repeat(self.point(x)[None, :], self.groups, axis=0), list(range(self.groups))
+        return self.problem.at_every_group(self.point(x))
 
     def keys(self, theta: np.ndarray) -> list[str]:
         """Result-cache keys of the runs at parameters ``theta`` (one per condition group)."""
-        return self.runs.keys(np.repeat(theta[None, :], self.groups, axis=0), range(self.groups))
+        return self.runs.keys(*self.problem.at_every_group(theta))
 
     def evaluate(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Residual (n,) and curves (G, A) at ``x``; curves None where the solver failed

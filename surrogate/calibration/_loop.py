@@ -305,7 +305,7 @@ class CalibrationLoop:
         """How many more verifications — a run at every condition group each — fit within
         the budget (``budget``: a phase's own limit instead of the loop's)."""
         limit = self.budget if budget is None else budget
-        return max(0, (limit - self.runs.calls) // len(self.problem.groups))
+        return max(0, (limit - self.runs.calls) // self.problem.runs_per_point)
 
     def budget_spent(self) -> bool:
         """Whether the budget is what stopped the loop: no further verification fits."""
@@ -381,7 +381,7 @@ class CalibrationLoop:
 
     def _global(self, model: CurveSurrogate, surrogate_trials: int) -> None:
         """The initial design, then surrogate search and verification until it settles."""
-        G = len(self.problem.groups)
+        G = self.problem.runs_per_point
         self._initial_design()
         # the local phase needs what is left: the global phase takes at most half the budget
         stale, half = 0, min(self.budget, max(self.budget // 2, self.runs.calls + G))
@@ -409,11 +409,10 @@ class CalibrationLoop:
     def smallest_budget(self) -> tuple[int, str]:
         """The fewest solver runs this loop can do anything with, and what they are: its
         initial design and one verification (a run at every condition group)."""
-        G = len(self.problem.groups)
         return (
-            self.design_size() + G,
-            f"an initial design of {self.design_size()} and one verification at the "
-            f"{G} condition group{'s' if G != 1 else ''}",
+            self.design_size() + self.problem.runs_per_point,
+            f"an initial design of {self.design_size()} and one verification: "
+            f"{self.problem.one_verification()}",
         )
 
     def _initial_design(self) -> None:
@@ -421,7 +420,7 @@ class CalibrationLoop:
         turn — no more than leaves one verification within the budget, and none where
         not even that fits (a loop that takes over late)."""
         problem = self.problem
-        d, G = len(problem.space), len(problem.groups)
+        d, G = len(problem.space), problem.runs_per_point
         n0 = min(self.design_size(), self.budget - self.runs.calls - G)
         if n0 < 1:
             return
@@ -517,8 +516,7 @@ class CalibrationLoop:
         return verified
 
     def _verify(self, theta: np.ndarray, predicted: float | None) -> VerifiedPoint | None:
-        G = len(self.problem.groups)
-        out = self.runs.run(np.repeat(theta[None, :], G, axis=0), list(range(G)))
+        out = self.runs.run(*self.problem.at_every_group(theta))
         runs = [o for o in out if o is not None]
         if len(runs) < len(out):
             return None

@@ -157,6 +157,25 @@ class CalibrationProblem:
             (coating if effect is None else effects[effect])[param] = float(value)
         return coating, effects
 
+    # -- a verification: one point at every condition group -------------------------------------
+    @property
+    def runs_per_point(self) -> int:
+        """Solver runs one parameter point costs: one at every condition group (``G``)."""
+        return len(self.groups)
+
+    def at_every_group(self, theta: np.ndarray) -> tuple[np.ndarray, list[int]]:
+        """The runs of one parameter point (a verification): ``theta`` repeated (G, p) and
+        the groups ``0 … G−1``."""
+        G = self.runs_per_point
+        return np.repeat(np.asarray(theta)[None, :], G, axis=0), list(range(G))
+
+    def one_verification(self) -> str:
+        """What one verification is, in words: a run at each condition group."""
+        G = self.runs_per_point
+        return "a run at " + (
+            f"each of the {G} condition groups" if G != 1 else "the one condition group"
+        )
+
     def state(self, theta: np.ndarray, group: int) -> ModelState:
         """The model state the solver sees for parameter vector ``theta`` at a group."""
         coating, effects = self._split(theta)

@@ -221,8 +221,8 @@ SAYS = {
     "study-is-a-folder": "is a folder; name a file in it",
     "samples-is-a-folder": "is a folder; name a file in it",
     "calibrate-budget-below-design": "--budget 10 is too small for this calibration: it "
-    "needs at least 12 solver runs (an initial design of 8 and one verification at the 4 "
-    "condition groups)",
+    "needs at least 12 solver runs (an initial design of 8 and one verification: a run at "
+    "each of the 4 condition groups)",
     "calibrate-study-budget-below-design": "[budget] calibration_solver_calls 11 is too small",
     "calibrate-storage-unknown-scheme": "unknown scheme 'foo'",
     "calibrate-storage-folder-missing": "does not exist; create it first",
