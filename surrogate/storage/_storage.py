@@ -49,6 +49,7 @@ __all__ = [
     "StorageError",
     "check_storage_url",
     "check_workers",
+    "in_memory_storage",
     "local_storage_file",
     "normalise_storage_url",
     "open_storage",
@@ -140,9 +141,28 @@ def storage_kind(url: str) -> str:
     return "rdb"
 
 
+def in_memory_storage(url: str) -> bool:
+    """Whether ``url`` is an SQLite database in this process's memory (``sqlite://``,
+    ``sqlite:///:memory:``, ``mode=memory``): it ends with the process, and no other
+    process sees it."""
+    url = normalise_storage_url(url)
+    if not url.startswith("sqlite"):
+        return False
+    database = url.split("://", 1)[1].removeprefix("/")
+    return database == "" or database.startswith(":memory:") or "mode=memory" in database
+
+
 def check_workers(url: str, workers: int) -> None:
-    """Refuse more than one worker on SQLite (one line, with the fix)."""
+    """Refuse more than one worker on SQLite, and workers in other processes on an
+    in-memory database (one line, with the fix)."""
     check_jobs(workers, minimum=0)
+    if workers != 1 and in_memory_storage(url):
+        who = "the workers --jobs 0 plans for" if workers == 0 else f"--jobs {workers} workers"
+        raise InputDataError(
+            f"--storage {url!r}: an in-memory SQLite database exists only inside this process, "
+            f"so {who} would never see it; use --storage journal:///path/study.log (one "
+            "machine) or postgresql://user@host/db (many machines), or --jobs 1"
+        )
     if workers > 1 and storage_kind(url) == "sqlite":
         raise InputDataError(
             f"--jobs {workers} on SQLite: SQLite hands the same queued trial to two workers; "
@@ -158,10 +178,10 @@ def journal_path(url: str) -> Path | None:
 
 
 def local_storage_file(url: str) -> Path | None:
-    """The SQLite or journal file of ``url``; None for a server (or ``sqlite://``, in memory)."""
+    """The SQLite or journal file of ``url``; None for a server or an in-memory database."""
     url = normalise_storage_url(url)
     local = journal_path(url)
-    if url.startswith("sqlite:///"):
+    if url.startswith("sqlite:///") and not in_memory_storage(url):
         local = Path(url.removeprefix("sqlite:///").split("?")[0].removeprefix("file:"))
     return local
 
@@ -213,6 +233,12 @@ def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool =
     with _quiet_experimental():
         retry = RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)
     path = journal_path(url)
+    if must_exist and in_memory_storage(url):
+        raise InputDataError(
+            f"--storage {url!r}: a worker cannot join an in-memory SQLite database (it exists "
+            "only inside the process that made it); plan and work on one storage: "
+            "journal:///path/study.log or postgresql://user@host/db"
+        )
     if must_exist:
         local = missing_local_storage(url)
         if local is not None:

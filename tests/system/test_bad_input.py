@@ -140,6 +140,13 @@ CASES = [
         {},
         ["run", "paper_coating.toml", "--storage", "sqlite:///{d}/paper-coating.db", "--jobs", "3"],
     ),
+    # an in-memory SQLite database: no other process sees it, so no worker ever could
+    ("storage-memory-worker", {}, ["worker", "paper_coating.toml", "--storage", "sqlite://"]),
+    (
+        "storage-memory-plan-for-workers",
+        {},
+        ["run", "paper_coating.toml", "--storage", "sqlite:///:memory:", "--jobs", "0"],
+    ),
     ("storage-unknown-scheme", {}, ["worker", "paper_coating.toml", "--storage", "bogus://x"]),
     ("storage-not-a-url", {}, ["worker", "paper_coating.toml", "--storage", "study.db"]),
     (
@@ -224,6 +231,8 @@ SAYS = {
     "needs at least 12 solver runs (an initial design of 8 and one verification: a run at "
     "each of the 4 condition groups)",
     "calibrate-study-budget-below-design": "[budget] calibration_solver_calls 11 is too small",
+    "storage-memory-worker": "a worker cannot join an in-memory SQLite database",
+    "storage-memory-plan-for-workers": "so the workers --jobs 0 plans for would never see it",
     "calibrate-storage-unknown-scheme": "unknown scheme 'foo'",
     "calibrate-storage-folder-missing": "does not exist; create it first",
     "compare-storage-unknown-scheme": "unknown scheme 'foo'",
