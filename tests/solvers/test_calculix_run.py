@@ -72,7 +72,9 @@ def test_a_thick_soft_coat_bends_smoothly_and_the_same_deck_repeats(ccx, tmp_pat
     ccx 2.20 with automatic increments and its contact's random part (``alea``, default
     0.1) took other cutbacks above ~75° when the same deck ran again: curves up to 5.8 %
     apart (README, "CalculiX"). The deck's fixed increments and ``alea = 0`` make two
-    runs of one input agree. The three runs at once (~40 s on a quiet 2-core machine)."""
+    runs of one input agree. The three runs at once: 123 s wall, 189 s of CPU (2-core AMD
+    EPYC, 2026-11-28, with another test process beside it for part of it; one run alone
+    60 s of ccx CPU) — the suite's largest test."""
     thick = {
         "ecoat_gpa": 0.618338515454858,
         "scoat_gpa": 0.07857897512102752,
