@@ -170,7 +170,9 @@ def test_compare_shows_where_the_base_model_fails(tmp_path):
     [
         (["--effect", "no_such_effect"], "unknown effect 'no_such_effect'"),
         (["--plugin", "no_such_module_xyz"], "cannot import plug-in module"),
-        (["--budget", "3"], "--budget must be ≥ 10"),
+        (["--budget", "0"], "--budget must be a whole number ≥ 1 of solver runs, got 0"),
+        # what the calibration needs is its loop's: 3 parameters at 1 group, 8 + 1 runs
+        (["--budget", "8"], "--budget 8 is too small for this calibration: it needs at least 9"),
         (["--jobs", "0"], "--jobs must be ≥ 1"),
     ],
 )
@@ -201,7 +203,13 @@ BAD_FILES = {
     ("options", "message"),
     [
         ({"jobs": 0}, "--jobs must be ≥ 1, got 0"),
-        ({"max_solver_calls": 5}, "--budget must be ≥ 10 solver runs, got 5"),
+        ({"max_solver_calls": 0}, "--budget must be a whole number ≥ 1 of solver runs, got 0"),
+        (
+            {"max_solver_calls": 5},
+            "--budget 5 is too small for this calibration: it needs at least 9 solver runs (an "
+            "initial design of 8 and one verification: a run at the one condition group); "
+            "raise it",
+        ),
     ],
 )
 def test_the_api_refuses_what_the_cli_refuses_before_writing(tmp_path, options, message):

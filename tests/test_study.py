@@ -90,7 +90,7 @@ BAD = {
         "names an effect twice",
     ),
     "calibration-budget": (
-        GOOD.replace("[budget]", "[budget]\ncalibration_solver_calls = 2"),
+        GOOD.replace("[budget]", "[budget]\ncalibration_solver_calls = 0"),
         "budget.calibration_solver_calls",
     ),
     "noise-negative": (

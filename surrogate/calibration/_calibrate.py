@@ -151,7 +151,9 @@ def calibrate(
     storage : str, optional
         Optuna storage URL; default: the study's.
     max_solver_calls : int, optional
-        Budget of full-solver runs, ≥ 10 (default: ``[budget] calibration_solver_calls``).
+        Budget of full-solver runs (default: ``[budget] calibration_solver_calls``); one
+        too small for the initial design and one verification (with an external solver
+        and its built-in prior: for one verification) is refused before any run.
     jobs : int
         Worker processes for the runs of one verification (≥ 1).
     progress : bool

@@ -32,7 +32,6 @@ from ..study._spec import StudySpec, load_study
 from ..study._units import gpa_to_mpa
 
 __all__ = [
-    "MIN_BUDGET",
     "RIG_CONDITIONS",
     "CalibrationProblem",
     "calibration_study_name",
@@ -41,8 +40,6 @@ __all__ = [
     "load_calibration",
     "model_label",
 ]
-
-MIN_BUDGET = 10  # full-solver runs: fewer cannot fit even the initial design
 
 
 def model_label(effects: Sequence[str]) -> str:
@@ -276,8 +273,11 @@ def load_calibration(
 
 
 def check_budget(budget: Any) -> None:
-    """``--budget``: None (the study's) or a whole number ≥ ``MIN_BUDGET`` of solver runs."""
+    """``--budget``: None (the study's) or a whole number ≥ 1 of solver runs. How many
+    a calibration needs is its loop's (``smallest_budget``), checked once the study is
+    read: an initial design and one verification, or with the built-in solver as the
+    prior of an external one, that one verification."""
     if budget is None:
         return
-    if isinstance(budget, bool) or not isinstance(budget, int) or budget < MIN_BUDGET:
-        raise InputDataError(f"--budget must be ≥ {MIN_BUDGET} solver runs, got {budget}")
+    if isinstance(budget, bool) or not isinstance(budget, int) or budget < 1:
+        raise InputDataError(f"--budget must be a whole number ≥ 1 of solver runs, got {budget!r}")

@@ -421,6 +421,6 @@ def _budget(section: dict[str, Any], where: str) -> Budget:
         section.get("calibration_solver_calls", default.calibration_solver_calls),
         where,
         "budget.calibration_solver_calls",
-        low=10,
+        low=1,  # what a calibration needs is its loop's (a refusal before any run)
     )
     return Budget(initial, calls, per, trials, identifiability, calibration)
