@@ -829,6 +829,19 @@ def test_a_budget_below_todays_design_is_the_corrected_loops_to_spend(distorted_
     # measured: budget_exhausted at 2.2 × the truth's RMSE, "… raise --budget"
     assert result.status == "converged" or "raise --budget" in result.message, result.message
 
+    # a budget of one verification, at a point the expensive solver cannot run: the
+    # message names the budget as well as the ranges
+    failing = path.read_text().replace(
+        'kind = "test-distorted"', 'kind = "test-distorted"\nfail_above_tcoat_mm = 0.005'
+    )
+    path.write_text(failing)
+    with pytest.raises(surrogate.InputDataError) as error:
+        surrogate.calibrate(path, max_solver_calls=2, progress=False)
+    said = str(error.value)
+    assert "found no parameter point the solver could run at every test" in said
+    assert "all 2 solver runs of the budget were spent: raise --budget, or check" in said
+    path.write_text(failing.replace("\nfail_above_tcoat_mm = 0.005", ""))
+
     single = 'kind = "test-distorted"\nmulti_fidelity = false'
     path.write_text(path.read_text().replace('kind = "test-distorted"', single))
     runs = _expensive_runs(log_runs)

@@ -22,9 +22,17 @@ from surrogate.storage._storage import (
         ("sqlite://", True, None),
         ("sqlite:///:memory:", True, None),
         ("sqlite:///file:shared?mode=memory&cache=shared&uri=true", True, None),
+        ("sqlite:///file::memory:?cache=shared&uri=true", True, None),
         ("sqlite:///study.db", False, Path("study.db")),
+        ("sqlite+pysqlite:///study.db", False, Path("study.db")),
         ("sqlite:////srv/runs/study.db", False, Path("/srv/runs/study.db")),
-        ("sqlite:///memory.db", False, Path("memory.db")),  # a file named so
+        ("sqlite:///file:runs/study.db?uri=true", False, Path("runs/study.db")),
+        # files named so, or a mode SQLite reads only in a URI filename
+        ("sqlite:///memory.db", False, Path("memory.db")),
+        ("sqlite:///:memory:.db", False, Path(":memory:.db")),
+        ("sqlite:///runs/mode=memory.db", False, Path("runs/mode=memory.db")),
+        ("sqlite:///study.db?mode=memory", False, Path("study.db")),
+        ("journal:///srv/study.log", False, Path("/srv/study.log")),
         ("postgresql://user@host/db", False, None),
     ],
 )
@@ -42,5 +50,5 @@ def test_an_in_memory_database_serves_one_process_and_refuses_workers():
     for workers, says in ((0, "the workers --jobs 0 plans for"), (3, "--jobs 3 workers")):
         with pytest.raises(InputDataError, match=says):
             check_workers("sqlite:///:memory:", workers)
-    with pytest.raises(InputDataError, match="a worker cannot join an in-memory"):
+    with pytest.raises(InputDataError, match="so a worker would find nothing in it"):
         open_storage("sqlite://", heartbeat_s=1, must_exist=True)

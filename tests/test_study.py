@@ -104,6 +104,14 @@ BAD = {
 }
 
 
+def test_a_calibration_budget_below_a_design_loads(tmp_path):
+    """What a calibration needs is its loop's (one verification with a built-in prior):
+    the study file takes any whole number of runs ≥ 1 (a floor of 10 refused 2)."""
+    path = tmp_path / "s.toml"
+    path.write_text(GOOD.replace("[budget]", "[budget]\ncalibration_solver_calls = 2"))
+    assert load_study(path).budget.calibration_solver_calls == 2
+
+
 def test_multi_fidelity_is_on_for_an_external_solver_unless_switched_off(tmp_path):
     path = tmp_path / "s.toml"
     calculix = GOOD.replace('kind = "builtin"', 'kind = "calculix"')

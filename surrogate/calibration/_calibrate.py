@@ -259,9 +259,14 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
     fit, best = loop.best_fit(), loop.best()
     if best is None:
         reason = runs.failures[0] if runs.failures else "no verification fitted in the budget"
+        all_spent = (  # a budget of one verification has no run left for another point
+            f"all {loop.budget} solver runs of the budget were spent: raise --budget, or "
+            if runs.failures and loop.budget_spent()
+            else ""
+        )
         raise InputDataError(
             f"calibration of {name} found no parameter point the solver could run at every "
-            f"test ({reason}); check the parameter ranges"
+            f"test ({reason}); {all_spent}check the parameter ranges"
         )
     converged = loop.converged_at_best()
     misfit, p_value, determination = None, None, None

@@ -56,7 +56,7 @@ from ..effects import available_effects, get_effect
 from ..solvers import get_solver
 from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import quiet_optuna
-from ..storage._storage import check_storage_url, open_storage
+from ..storage._storage import check_storage_url, open_storage, refuse_in_memory
 from ._calibrate import (
     CalibrationResult,
     calibration_note,
@@ -170,6 +170,7 @@ def diagnose(
     spec, data, chosen, noise = load_calibration(study, effects, plugins)
     url = storage or spec.default_storage()
     check_storage_url(url)  # before the work
+    refuse_in_memory(url, "the diagnosis (it reads back its model ladder)")
     # an external solver's runs of one verification (minutes each) side by side; the
     # built-in solver's (milliseconds) stay in this process
     expensive_jobs = cpu_jobs(jobs) if spec.low_fidelity else 1

@@ -203,8 +203,8 @@ def work(
     """
     spec = study if isinstance(study, StudySpec) else load_study(study)
     refuse_model_effects(spec, "surrogate worker")
-    check_workers(storage, jobs)
     check_jobs(jobs)
+    check_workers(storage, jobs)
     if not isinstance(idle_timeout_s, int | float) or not idle_timeout_s >= 0:
         raise InputDataError(f"--idle-timeout must be ≥ 0 s, got {idle_timeout_s!r}")
     quiet_optuna()

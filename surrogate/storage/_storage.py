@@ -54,6 +54,7 @@ __all__ = [
     "normalise_storage_url",
     "open_storage",
     "redacted_url",
+    "refuse_in_memory",
     "storage_error_message",
     "storage_kind",
 ]
@@ -143,13 +144,37 @@ def storage_kind(url: str) -> str:
 
 def in_memory_storage(url: str) -> bool:
     """Whether ``url`` is an SQLite database in this process's memory (``sqlite://``,
-    ``sqlite:///:memory:``, ``mode=memory``): it ends with the process, and no other
-    process sees it."""
+    ``sqlite:///:memory:``; with ``uri=true``, ``file::memory:`` or ``mode=memory``): it
+    starts empty in every process and ends with it."""
+    sqlite = _sqlite_database(url)
+    return sqlite is not None and sqlite[1]
+
+
+def _sqlite_database(url: str) -> tuple[str, bool] | None:
+    """An SQLite URL's database file (as SQLite reads it) and whether it is in memory;
+    None for another storage."""
     url = normalise_storage_url(url)
     if not url.startswith("sqlite"):
-        return False
-    database = url.split("://", 1)[1].removeprefix("/")
-    return database == "" or database.startswith(":memory:") or "mode=memory" in database
+        return None
+    from sqlalchemy.engine import make_url
+
+    parsed = make_url(url)
+    database = parsed.database or ""
+    if str(parsed.query.get("uri", "")).lower() == "true":  # an SQLite URI filename
+        file = database.removeprefix("file:")
+        return file, parsed.query.get("mode") == "memory" or file.startswith(":memory:")
+    return database, database in ("", ":memory:")
+
+
+def refuse_in_memory(url: str, reader: str) -> None:
+    """Refuse an in-memory database to ``reader``, which reads what another command or
+    process stored: it would find nothing (one line, with the fix)."""
+    if in_memory_storage(url):
+        raise InputDataError(
+            f"--storage {url!r}: an in-memory SQLite database starts empty in every process, "
+            f"so {reader} would find nothing in it; use the file or server the study is "
+            "stored in (journal:///path/study.log, sqlite:///path.db or postgresql://…)"
+        )
 
 
 def check_workers(url: str, workers: int) -> None:
@@ -179,11 +204,11 @@ def journal_path(url: str) -> Path | None:
 
 def local_storage_file(url: str) -> Path | None:
     """The SQLite or journal file of ``url``; None for a server or an in-memory database."""
-    url = normalise_storage_url(url)
-    local = journal_path(url)
-    if url.startswith("sqlite:///") and not in_memory_storage(url):
-        local = Path(url.removeprefix("sqlite:///").split("?")[0].removeprefix("file:"))
-    return local
+    sqlite = _sqlite_database(url)
+    if sqlite is not None:
+        database, memory = sqlite
+        return None if memory else Path(database)
+    return journal_path(url)
 
 
 def missing_local_storage(url: str) -> Path | None:
@@ -233,13 +258,8 @@ def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool =
     with _quiet_experimental():
         retry = RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)
     path = journal_path(url)
-    if must_exist and in_memory_storage(url):
-        raise InputDataError(
-            f"--storage {url!r}: a worker cannot join an in-memory SQLite database (it exists "
-            "only inside the process that made it); plan and work on one storage: "
-            "journal:///path/study.log or postgresql://user@host/db"
-        )
     if must_exist:
+        refuse_in_memory(url, "a worker")
         local = missing_local_storage(url)
         if local is not None:
             raise InputDataError(

@@ -147,6 +147,15 @@ CASES = [
         {},
         ["run", "paper_coating.toml", "--storage", "sqlite:///:memory:", "--jobs", "0"],
     ),
+    # … nor would a command that reads what another one stored
+    ("storage-memory-dashboard", {}, ["dashboard", "paper_coating.toml", "--storage", "sqlite://"]),
+    ("storage-memory-report", {}, ["report", "paper_coating.toml", "--storage", "sqlite://"]),
+    ("storage-memory-export", {}, ["export", "paper_coating.toml", "--storage", "sqlite://"]),
+    (
+        "storage-memory-diagnose",
+        {},
+        ["diagnose", "webbing.toml", "--storage", "sqlite:///file::memory:?uri=true"],
+    ),
     ("storage-unknown-scheme", {}, ["worker", "paper_coating.toml", "--storage", "bogus://x"]),
     ("storage-not-a-url", {}, ["worker", "paper_coating.toml", "--storage", "study.db"]),
     (
@@ -231,7 +240,11 @@ SAYS = {
     "needs at least 12 solver runs (an initial design of 8 and one verification: a run at "
     "each of the 4 condition groups)",
     "calibrate-study-budget-below-design": "[budget] calibration_solver_calls 11 is too small",
-    "storage-memory-worker": "a worker cannot join an in-memory SQLite database",
+    "storage-memory-worker": "starts empty in every process, so a worker would find nothing",
+    "storage-memory-dashboard": "so the dashboard would find nothing in it",
+    "storage-memory-report": "so the report would find nothing in it",
+    "storage-memory-export": "so export would find nothing in it",
+    "storage-memory-diagnose": "so the diagnosis (it reads back its model ladder) would find",
     "storage-memory-plan-for-workers": "so the workers --jobs 0 plans for would never see it",
     "calibrate-storage-unknown-scheme": "unknown scheme 'foo'",
     "calibrate-storage-folder-missing": "does not exist; create it first",
