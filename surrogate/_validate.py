@@ -7,7 +7,7 @@ import operator
 
 from ._errors import InputDataError
 
-__all__ = ["check_finite", "check_positive", "check_range", "check_seed"]
+__all__ = ["check_budget", "check_finite", "check_positive", "check_range", "check_seed"]
 
 
 def check_finite(name: str, value: object) -> float:
@@ -31,6 +31,15 @@ def check_seed(seed: object) -> int:
     if isinstance(seed, bool) or value < 0:
         raise InputDataError(f"--seed must be a whole number ≥ 0, got {seed!r}")
     return value
+
+
+def check_budget(budget: object) -> None:
+    """``--budget``: None (the study's) or a whole number ≥ 1 of solver runs. How many a
+    job needs is its loop's, checked once the study is read."""
+    if budget is None:
+        return
+    if isinstance(budget, bool) or not isinstance(budget, int) or budget < 1:
+        raise InputDataError(f"--budget must be a whole number ≥ 1 of solver runs, got {budget!r}")
 
 
 def check_positive(name: str, value: object, *, unit: str = "") -> float:

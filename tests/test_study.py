@@ -112,6 +112,22 @@ def test_a_calibration_budget_below_a_design_loads(tmp_path):
     assert load_study(path).budget.calibration_solver_calls == 2
 
 
+def test_a_main_job_budget_below_the_design_loads_where_the_built_in_solver_is_the_prior(
+    tmp_path,
+):
+    """With CalculiX and its built-in prior the main job starts from the corrected
+    model's answer (one run), not from ``initial_samples`` runs on CalculiX: a budget of 2
+    loads there, and is refused where the design runs on the full solver."""
+    path = tmp_path / "s.toml"
+    small = GOOD.replace("max_solver_calls = 30", "max_solver_calls = 2")
+    path.write_text(small.replace('kind = "builtin"', 'kind = "calculix"'))
+    assert load_study(path).budget.max_solver_calls == 2
+    single = 'kind = "calculix"\nmulti_fidelity = false'
+    path.write_text(small.replace('kind = "builtin"', single))
+    with pytest.raises(InputDataError, match=r"budget.max_solver_calls \(2\) must be ≥"):
+        load_study(path)
+
+
 def test_multi_fidelity_is_on_for_an_external_solver_unless_switched_off(tmp_path):
     path = tmp_path / "s.toml"
     calculix = GOOD.replace('kind = "builtin"', 'kind = "calculix"')

@@ -24,6 +24,7 @@ from optuna.distributions import BaseDistribution
 from .._errors import InputDataError
 from .._log import show_progress
 from .._pool import check_jobs, one_blas_thread_within
+from .._validate import check_budget
 from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import distributions, quiet_optuna
 from ..storage._storage import check_storage_url, open_storage
@@ -36,7 +37,6 @@ from ._loop import CalibrationLoop, SolverRuns, VerifiedPoint, determination_at
 from ._problem import (
     CalibrationProblem,
     calibration_study_name,
-    check_budget,
     load_calibration,
     model_label,
 )

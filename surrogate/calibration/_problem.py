@@ -35,7 +35,6 @@ __all__ = [
     "RIG_CONDITIONS",
     "CalibrationProblem",
     "calibration_study_name",
-    "check_budget",
     "coat_section",
     "load_calibration",
     "model_label",
@@ -270,14 +269,3 @@ def load_calibration(
             "add [measurements] noise_n (N) to the study"
         )
     return spec, data, chosen, float(noise)
-
-
-def check_budget(budget: Any) -> None:
-    """``--budget``: None (the study's) or a whole number ≥ 1 of solver runs. How many
-    a calibration needs is its loop's (``smallest_budget``), checked once the study is
-    read: an initial design and one verification, or with the built-in solver as the
-    prior of an external one, that one verification."""
-    if budget is None:
-        return
-    if isinstance(budget, bool) or not isinstance(budget, int) or budget < 1:
-        raise InputDataError(f"--budget must be a whole number ≥ 1 of solver runs, got {budget!r}")

@@ -23,7 +23,7 @@ from scipy.stats import norm
 from .._errors import InputDataError
 from .._log import show_progress
 from .._pool import one_blas_thread_within
-from .._validate import check_seed
+from .._validate import check_budget, check_seed
 from ..solvers._fidelity import MissCounter, fidelity_record
 from ..storage._dashboard import attach_run_report
 from ..storage._optuna import distributions
@@ -148,8 +148,11 @@ def _search_and_verify(spec: StudySpec, verifier: Verifier, fidelity: _Fidelity 
         if fidelity.dropped is None:
             return iteration
         prefix = "single fidelity: "
-    initial = make_design("lhs", spec.space, n=spec.budget.initial_samples, seed=spec.seed)
-    verifier.verify(initial[list(spec.space.names)].to_numpy(), phase=f"{prefix}initial design")
+    # after a dropped correction, the design fits within the runs left
+    n0 = min(spec.budget.initial_samples, spec.budget.max_solver_calls - verifier.calls)
+    if n0 > 0:
+        initial = make_design("lhs", spec.space, n=n0, seed=spec.seed)
+        verifier.verify(initial[list(spec.space.names)].to_numpy(), phase=f"{prefix}initial design")
     while verifier.chosen() is None and verifier.calls < spec.budget.max_solver_calls:
         iteration += 1
         model = fit_surrogate(verifier.sample_set(), seed=spec.seed, with_curves=False)
@@ -221,15 +224,12 @@ def _with_overrides(
             raise InputDataError(f"target f60_n must be a number > 0, got {target!r}")
         spec = dataclasses.replace(spec, targets=Targets(target, spec.targets.tolerance))
     if budget is not None:
-        if budget < spec.budget.initial_samples:
-            raise InputDataError(
-                f"--budget must be ≥ budget.initial_samples "
-                f"({spec.budget.initial_samples}), got {budget}"
-            )
+        check_budget(budget)
         spec = dataclasses.replace(
             spec,
             budget=dataclasses.replace(spec.budget, max_solver_calls=budget),
         )
+        spec.budget.check_main_job(spec.low_fidelity, "--budget")
     if spec.targets.f60_n is None:
         raise InputDataError(
             "surrogate run needs [targets] f60_n (or --target f60_n=VALUE); "

@@ -65,6 +65,18 @@ class Budget:
     identifiability_runs: int = 3
     calibration_solver_calls: int = 200
 
+    def check_main_job(self, low_fidelity: bool, name: str) -> None:
+        """Room for the main job's start within ``max_solver_calls`` (``name`` says where
+        it was set): its initial design of ``initial_samples`` runs on the full solver;
+        with the built-in solver as the prior of an external one the corrected model's
+        first answer, one run, so any budget ≥ 1 (the design runs only if the correction
+        is dropped, with the runs left)."""
+        if not low_fidelity and self.max_solver_calls < self.initial_samples:
+            raise InputDataError(
+                f"{name} ({self.max_solver_calls}) must be ≥ "
+                f"budget.initial_samples ({self.initial_samples})"
+            )
+
 
 @dataclass(frozen=True)
 class StudySpec:
@@ -134,6 +146,11 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
     order = _preferences(_section(data, "preferences", where), space, where)
     effects = _effects(_section(data, "model", where), where)
     budget = _budget(_section(data, "budget", where), where)
+    from ..solvers._fidelity import uses_low_fidelity  # (the solvers import this module)
+
+    budget.check_main_job(
+        uses_low_fidelity(kind, multi_fidelity), f"{where}: budget.max_solver_calls"
+    )
     if targets.f60_n is None and measurements is None:
         raise InputDataError(
             f"{where}: a study needs [targets] f60_n or [measurements] file; add one"
@@ -394,11 +411,6 @@ def _budget(section: dict[str, Any], where: str) -> Budget:
         "budget.max_solver_calls",
         low=1,
     )
-    if calls < initial:
-        raise InputDataError(
-            f"{where}: budget.max_solver_calls ({calls}) must be ≥ "
-            f"budget.initial_samples ({initial})"
-        )
     per = _int(
         section.get("candidates_per_iteration", default.candidates_per_iteration),
         where,
