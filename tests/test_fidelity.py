@@ -146,7 +146,7 @@ def test_a_correction_too_large_is_dropped_and_the_single_fidelity_loop_verifies
 def test_a_main_job_budget_below_todays_design_is_the_corrected_loops(distorted_solver, log_runs):
     """The corrected model answers first, so ``--budget 2`` is spent on it (today's loop
     refuses it: its design is 5 runs on the expensive solver); where the correction is
-    dropped after its first run, today's design gets the runs left, not 5 more."""
+    dropped after its first run, today's design runs as far as the budget goes."""
     path = _paper_study(log_runs / "mf", "")
     result = surrogate.run(path, budget=2, progress=False)
     assert result.solver_calls == _expensive_runs(log_runs) <= 2
@@ -160,7 +160,7 @@ def test_a_main_job_budget_below_todays_design_is_the_corrected_loops(distorted_
     runs = _expensive_runs(log_runs)
     result = surrogate.run(dropped, budget=3, progress=False)
     assert result.multi_fidelity["dropped_after"] == 1
-    assert result.solver_calls == _expensive_runs(log_runs) - runs == 3  # 1 + a design of 2
+    assert result.solver_calls == _expensive_runs(log_runs) - runs == 3  # 1 + the design's first 2
     assert "the single-fidelity loop took over" in result.message
 
 

@@ -148,11 +148,10 @@ def _search_and_verify(spec: StudySpec, verifier: Verifier, fidelity: _Fidelity 
         if fidelity.dropped is None:
             return iteration
         prefix = "single fidelity: "
-    # after a dropped correction, the design fits within the runs left
-    n0 = min(spec.budget.initial_samples, spec.budget.max_solver_calls - verifier.calls)
-    if n0 > 0:
-        initial = make_design("lhs", spec.space, n=n0, seed=spec.seed)
-        verifier.verify(initial[list(spec.space.names)].to_numpy(), phase=f"{prefix}initial design")
+    # the same design whatever the budget (a resume with a larger one replays it); verify
+    # runs what fits in the runs left (after a dropped correction, fewer than all)
+    initial = make_design("lhs", spec.space, n=spec.budget.initial_samples, seed=spec.seed)
+    verifier.verify(initial[list(spec.space.names)].to_numpy(), phase=f"{prefix}initial design")
     while verifier.chosen() is None and verifier.calls < spec.budget.max_solver_calls:
         iteration += 1
         model = fit_surrogate(verifier.sample_set(), seed=spec.seed, with_curves=False)
