@@ -164,6 +164,27 @@ def test_a_main_job_budget_below_todays_design_is_the_corrected_loops(distorted_
     assert "the single-fidelity loop took over" in result.message
 
 
+def test_the_batch_that_meets_the_target_is_not_judged_for_irregularity(
+    distorted_solver, log_runs, monkeypatch
+):
+    """A drop of the correction starts today's design on the expensive solver (5 runs), so
+    the batch whose run met the target is not judged: every judged prediction is recorded
+    (none a miss here), and the run that verified is not among them."""
+    import surrogate.identify._loop as loop
+
+    judged = []
+
+    class Recording(loop.MissCounter):
+        def judge(self, error, sd, tolerance):
+            judged.append(error)
+            return False
+
+    monkeypatch.setattr(loop, "MissCounter", Recording)
+    result = surrogate.run(_paper_study(log_runs / "mf", ""), progress=False)
+    assert result.status == "verified" and result.multi_fidelity["dropped"] is None
+    assert len(judged) == result.calls_to_verify - 1  # one candidate a batch, all but the last
+
+
 @pytest.mark.slow
 def test_an_irregular_correction_is_dropped(distorted_solver, log_runs):
     """A ripple in D far shorter than the correction's length scale (±8 %): on every seed

@@ -182,7 +182,9 @@ def _corrected_search(spec: StudySpec, verifier: Verifier, fidelity: _Fidelity) 
     """Search the corrected built-in model and verify its candidates until a verified
     point meets the target; the first expensive run is the built-in model's own answer
     (its ``initial design``). Stops early, with ``fidelity.dropped`` set, where the
-    correction is too large or too irregular; returns the iterations."""
+    correction is too large or too irregular — judged on batches that did not meet the
+    target: a drop at the answer would start today's design on the expensive solver for
+    nothing; returns the iterations."""
     misses = MissCounter()
     iteration = 0
     tolerance = float(np.log1p(spec.targets.tolerance))
@@ -200,6 +202,8 @@ def _corrected_search(spec: StudySpec, verifier: Verifier, fidelity: _Fidelity) 
             candidates, phase="initial design" if iteration == 0 else f"iteration {iteration}"
         )
         iteration += 1
+        if verifier.chosen() is not None:  # done: a batch that met the target drops nothing
+            return iteration
         for i, point in enumerate(candidates):
             record = verifier.record(dict(zip(spec.space.names, map(float, point), strict=True)))
             if record is None or not record.ok or not np.isfinite(predicted["f60_n"][i]):
