@@ -338,12 +338,11 @@ def _load(spec: StudySpec, url: str, suffix: str, command: str) -> tuple[Any, st
     import optuna
 
     from ..storage._optuna import quiet_optuna
-    from ..storage._storage import missing_local_storage, open_storage, refuse_in_memory
+    from ..storage._storage import open_storage, unstored
 
     quiet_optuna()
     name = f"{spec.name}/{suffix}"
-    refuse_in_memory(url, "export")
-    if missing_local_storage(url) is not None:  # a journal would be created, not read
+    if unstored(url, "export") is not None:  # a journal would be created, not read
         raise InputDataError(f"storage {url} does not exist; run `{command}` first")
     try:
         return optuna.load_study(study_name=name, storage=open_storage(url)), name

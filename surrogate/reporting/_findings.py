@@ -25,12 +25,7 @@ from ..calibration._problem import calibration_study_name, model_label
 from ..identify._export import export
 from ..identify._verify import Verification, Verifier, as_planned, verify_study_name
 from ..storage._optuna import quiet_optuna
-from ..storage._storage import (
-    missing_local_storage,
-    open_storage,
-    refuse_in_memory,
-    storage_errors,
-)
+from ..storage._storage import open_storage, storage_errors, unstored
 from ..study._measurements import MeasurementSet, load_measurements
 from ..study._spec import StudySpec
 
@@ -94,8 +89,7 @@ class Findings:
 def gather(spec: StudySpec, url: str) -> Findings:
     """Read what ``url`` holds of study ``spec``; refuse a storage with nothing of it."""
     command = f"surrogate {'run' if spec.targets.f60_n else 'calibrate'} {spec.path}"
-    refuse_in_memory(url, "the report")
-    if missing_local_storage(url) is not None:  # nothing is created where none is yet
+    if unstored(url, "the report") is not None:  # nothing is created where none is yet
         raise InputDataError(f"no storage at {url} yet; run `{command}` first")
     quiet_optuna()
     opened = open_storage(url)

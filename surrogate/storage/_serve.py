@@ -13,7 +13,7 @@ from .._errors import InputDataError
 from ..effects import check_effects
 from ..study._spec import StudySpec, load_study
 from ._dashboard import artifact_folder
-from ._storage import missing_local_storage, open_storage, refuse_in_memory
+from ._storage import open_storage, unstored
 
 __all__ = ["dashboard"]
 
@@ -34,8 +34,7 @@ def dashboard(
     if not 1024 <= port <= 65535:
         raise InputDataError(f"--port must be in [1024, 65535], got {port}")
     url = storage or spec.default_storage()
-    refuse_in_memory(url, "the dashboard")
-    if missing_local_storage(url) is not None:  # nothing is created where none is yet
+    if unstored(url, "the dashboard") is not None:  # nothing is created where none is yet
         raise InputDataError(f"no storage at {url} yet; run `surrogate run {spec.path}` first")
     opened = open_storage(url)  # a journal file works too
     try:

@@ -57,6 +57,7 @@ __all__ = [
     "refuse_in_memory",
     "storage_error_message",
     "storage_kind",
+    "unstored",
 ]
 
 HEARTBEAT_ATTR = "surrogate:heartbeat"
@@ -217,6 +218,15 @@ def missing_local_storage(url: str) -> Path | None:
     return local if local is not None and not local.exists() else None
 
 
+def unstored(url: str, reader: str) -> Path | None:
+    """What ``reader`` — a command or worker that reads what another one stored — would
+    find missing at ``url``: an in-memory database is refused (it starts empty in every
+    process); else the SQLite or journal file if it does not exist yet (its caller
+    refuses that with its own fix, creating nothing), else None."""
+    refuse_in_memory(url, reader)
+    return missing_local_storage(url)
+
+
 def check_storage_url(url: str) -> str:
     """``url`` normalised, refused (InputDataError) where it cannot name a storage: an
     unknown scheme, or a SQLite or journal file in a folder that does not exist or that
@@ -259,8 +269,7 @@ def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool =
         retry = RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)
     path = journal_path(url)
     if must_exist:
-        refuse_in_memory(url, "a worker")
-        local = missing_local_storage(url)
+        local = unstored(url, "a worker")
         if local is not None:
             raise InputDataError(
                 f"no storage at {local} yet; plan the study first "

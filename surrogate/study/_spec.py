@@ -146,16 +146,11 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
     order = _preferences(_section(data, "preferences", where), space, where)
     effects = _effects(_section(data, "model", where), where)
     budget = _budget(_section(data, "budget", where), where)
-    from ..solvers._fidelity import uses_low_fidelity  # (the solvers import this module)
-
-    budget.check_main_job(
-        uses_low_fidelity(kind, multi_fidelity), f"{where}: budget.max_solver_calls"
-    )
     if targets.f60_n is None and measurements is None:
         raise InputDataError(
             f"{where}: a study needs [targets] f60_n or [measurements] file; add one"
         )
-    return StudySpec(
+    spec = StudySpec(
         name=name,
         path=path,
         seed=seed,
@@ -173,6 +168,8 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
         budget=budget,
         storage=storage,
     )
+    spec.budget.check_main_job(spec.low_fidelity, f"{where}: budget.max_solver_calls")
+    return spec
 
 
 def _study(section: dict[str, Any], where: str) -> tuple[str, int, str | None]:
