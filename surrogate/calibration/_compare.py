@@ -31,7 +31,12 @@ from .._log import show_progress
 from .._pool import one_blas_thread_within
 from ..physics import curve_features
 from ..storage._optuna import quiet_optuna
-from ..storage._storage import check_storage_url, missing_local_storage, open_storage
+from ..storage._storage import (
+    check_storage_url,
+    missing_local_storage,
+    open_storage,
+    refuse_in_memory,
+)
 from ._calibrate import calibration_note
 from ._loop import SolverRuns
 from ._problem import CalibrationProblem, calibration_study_name, load_calibration, model_label
@@ -286,6 +291,7 @@ def _parameters(
 ) -> np.ndarray:
     names = problem.space.names
     if params is None:
+        refuse_in_memory(url, "`compare` without --params")
         raise InputDataError(
             f"no calibration of model {name!r} in {url}; run `surrogate calibrate` "
             "first or give --params"

@@ -156,6 +156,8 @@ CASES = [
         {},
         ["diagnose", "webbing.toml", "--storage", "sqlite:///file::memory:?uri=true"],
     ),
+    # compare reads a stored calibration unless --params gives the point
+    ("storage-memory-compare", {}, ["compare", "webbing.toml", "--storage", "sqlite://"]),
     ("storage-unknown-scheme", {}, ["worker", "paper_coating.toml", "--storage", "bogus://x"]),
     ("storage-not-a-url", {}, ["worker", "paper_coating.toml", "--storage", "study.db"]),
     (
@@ -245,6 +247,7 @@ SAYS = {
     "storage-memory-report": "so the report would find nothing in it",
     "storage-memory-export": "so export would find nothing in it",
     "storage-memory-diagnose": "so the diagnosis (it reads back its model ladder) would find",
+    "storage-memory-compare": "so `compare` without --params would find nothing in it",
     "storage-memory-plan-for-workers": "so the workers --jobs 0 plans for would never see it",
     "calibrate-storage-unknown-scheme": "unknown scheme 'foo'",
     "calibrate-storage-folder-missing": "does not exist; create it first",
