@@ -4,5 +4,5 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-bash scripts/system-packages.sh   # PostgreSQL and Chromium for the system tests (root: installs)
+bash scripts/system-packages.sh   # PostgreSQL, Chromium and CalculiX for the system tests (root: installs)
 exec .venv/bin/python -m pytest -q -n auto --dist worksteal "$@"   # pytest-xdist: a process a core
