@@ -87,6 +87,9 @@ class Effect:
     description: ClassVar[str] = ""
     parameters: ClassVar[tuple[EffectParameter, ...]] = ()
     reads: ClassVar[tuple[str, ...]] = ()
+    #: effects that can give the same curves (the same law in another guise): where this one
+    #: leads a diagnosis they are recalibrated over the whole space before a tie is judged
+    look_alikes: ClassVar[tuple[str, ...]] = ()
 
     def apply(
         self, state: ModelState, values: Mapping[str, float], conditions: Mapping[str, Any]

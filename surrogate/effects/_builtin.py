@@ -47,6 +47,9 @@ class Hardening(Effect):
     name = "hardening"
     description = "linear hardening of the coat instead of ideal plasticity (H/Ecoat)"
     parameters = (EffectParameter("ratio", 0.0, 0.5, 0.0),)
+    # linear kinematic hardening is, section for section, an elastic spring in parallel with
+    # an ideal-plastic coat: membrane bending's moment–curvature law (README)
+    look_alikes = ("membrane_bending",)
 
     def apply(
         self, state: ModelState, values: Mapping[str, float], conditions: Mapping[str, Any]
@@ -96,6 +99,7 @@ class MembraneBending(Effect):
     name = "membrane_bending"
     description = "bending stiffness of the bare webbing, D0 per unit width"
     parameters = (EffectParameter("d0_nmm", 0.0, 50.0, 0.0, "N·mm"),)
+    look_alikes = ("hardening",)
 
     def apply(
         self, state: ModelState, values: Mapping[str, float], conditions: Mapping[str, Any]
