@@ -52,7 +52,7 @@ import optuna
 from .._errors import InputDataError
 from .._log import show_progress
 from .._pool import check_jobs, cpu_jobs, imap_unordered, one_blas_thread_within, worker_count
-from ..effects import available_effects, get_effect
+from ..effects import available_effects, get_effect, look_alikes
 from ..solvers import get_solver
 from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import quiet_optuna
@@ -473,8 +473,8 @@ class _Refits:
     def recalibrate(self, ranking: list[Candidate]) -> list[Candidate]:
         """The leaders recalibrated over the whole space, with every candidate whose local
         refit ended pressed against a bound of a declared range (:meth:`_pressed`) and the
-        first's look-alikes (``Effect.look_alikes``) — and, before the verdict can be
-        "unexplained", every other candidate too; the ranking again.
+        first's look-alikes (:func:`~surrogate.effects.look_alikes`) — and, before the
+        verdict can be "unexplained", every other candidate too; the ranking again.
 
         A local refit stays in the basin of the current model's optimum (the coat's
         third parameter can sit in another; a compliant clamp needs a much stiffer
@@ -485,7 +485,7 @@ class _Refits:
         and the tie went unseen; with the Haswell kernels the two laws' refits had
         swapped places.
         """
-        alike = set(get_effect(ranking[0].effect).look_alikes) if ranking else set()
+        alike = look_alikes(ranking[0].effect) if ranking else set()
         leaders = [
             c.effect
             for c in ranking

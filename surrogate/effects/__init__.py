@@ -8,6 +8,7 @@ from ._base import (
     check_effects,
     get_effect,
     load_plugin,
+    look_alikes,
     register_effect,
 )
 
@@ -19,5 +20,6 @@ __all__ = [
     "check_effects",
     "get_effect",
     "load_plugin",
+    "look_alikes",
     "register_effect",
 ]

@@ -87,8 +87,9 @@ class Effect:
     description: ClassVar[str] = ""
     parameters: ClassVar[tuple[EffectParameter, ...]] = ()
     reads: ClassVar[tuple[str, ...]] = ()
-    #: effects that can give the same curves (the same law in another guise): where this one
-    #: leads a diagnosis they are recalibrated over the whole space before a tie is judged
+    #: effects that can give the same curves (the same law in another guise), declared on
+    #: one side of each pair (:func:`look_alikes` reads both): where one of a pair leads a
+    #: diagnosis the other is recalibrated over the whole space before a tie is judged
     look_alikes: ClassVar[tuple[str, ...]] = ()
 
     def apply(
@@ -151,6 +152,14 @@ def get_effect(name: str) -> Effect:
             f"{', '.join(sorted(registry))} (or load a plug-in with --plugin)"
         )
     return registry[name]
+
+
+def look_alikes(name: str) -> set[str]:
+    """The registered effects that are look-alikes of ``name``: those it declares and those
+    declaring it (the relation is symmetric; each pair is declared once)."""
+    registry = _registry()
+    declared = set(registry[name].look_alikes) if name in registry else set()
+    return declared | {other for other, e in registry.items() if name in e.look_alikes}
 
 
 def check_effects(names: Iterable[str], plugins: Iterable[str] = ()) -> tuple[str, ...]:

@@ -99,7 +99,6 @@ class MembraneBending(Effect):
     name = "membrane_bending"
     description = "bending stiffness of the bare webbing, D0 per unit width"
     parameters = (EffectParameter("d0_nmm", 0.0, 50.0, 0.0, "N·mm"),)
-    look_alikes = ("hardening",)
 
     def apply(
         self, state: ModelState, values: Mapping[str, float], conditions: Mapping[str, Any]

@@ -237,3 +237,21 @@ def test_a_model_state_replaced_is_dataclasses_replace():
 
     with pytest.raises(ValueError, match="tcoat_mm"):
         Checked(1000.0, 200.0, 0.012, Rig()).replace(tcoat_mm=0.0)
+
+
+def test_look_alikes_are_declared_once_and_read_both_ways(monkeypatch):
+    """hardening declares membrane_bending (one moment–curvature law); each sees the other,
+    no other built-in effect has one, and a plug-in's declaration is read from both sides."""
+    from surrogate.effects import _base, look_alikes
+
+    assert look_alikes("hardening") == {"membrane_bending"}
+    assert look_alikes("membrane_bending") == {"hardening"}
+    others = set(surrogate.available_effects()) - {"hardening", "membrane_bending"}
+    assert all(look_alikes(name) == set() for name in others)
+
+    class Stretch(surrogate.Effect):
+        name = "stretch"
+        look_alikes = ("tension",)
+
+    monkeypatch.setitem(_base._REGISTRY, "stretch", Stretch())
+    assert look_alikes("tension") == {"stretch"} and look_alikes("stretch") == {"tension"}
