@@ -185,6 +185,8 @@ def comparison(
     problem = CalibrationProblem(spec, data, chosen)
     url = storage or spec.default_storage()
     check_storage_url(url)  # before the work
+    if params is None:  # before the storage is opened: a new in-memory one holds nothing
+        refuse_in_memory(url, "`compare` without --params")
     name = calibration_study_name(spec, chosen)
     stored = None if params is not None else latest_calibration(url, name)
     theta = _parameters(problem, params if stored is None else stored["params"], url, name)
@@ -291,7 +293,6 @@ def _parameters(
 ) -> np.ndarray:
     names = problem.space.names
     if params is None:
-        refuse_in_memory(url, "`compare` without --params")
         raise InputDataError(
             f"no calibration of model {name!r} in {url}; run `surrogate calibrate` "
             "first or give --params"
