@@ -5,18 +5,20 @@ Both of the product's GPs (:mod:`._output`, :mod:`._curves`) use the kernel
 scikit-learn's log-marginal likelihood: about 30 evaluations a fit, hundreds of fits
 a calibration. Each evaluation sets ``kernel.theta`` and calls the composed kernel,
 and that bookkeeping (``get_params``, ``dir``, cloning of hyperparameter objects)
-outweighed the arithmetic on the product's tens of runs (``benchmarks/gp_fit.py``:
-fits 1.3–2.4 × and posterior means of a search batch 4.4–7 × faster, 10–80 runs).
+outweighed the arithmetic on the product's tens of runs (``benchmarks/gp_fit.py``, 10–230
+runs: fits 2.2–7.6 × and posterior means of a search batch 3.4–8.4 × faster).
 
 :class:`Regressor` evaluates the likelihood of that one kernel from ``theta``
 directly, in one compiled call (:mod:`._likelihood`): scikit-learn 1.9's definitions
 (``GaussianProcessRegressor.log_marginal_likelihood`` and the kernels' ``__call__`` and
 gradients) in loops, the Cholesky factor and the solves included, so that its numbers
-do not depend on the BLAS kernels either. They are scikit-learn's to rounding: the value
-to 1e-12 and the gradient to 1e-7 of its largest component (``tests/gp/test_regressor.py``
-checks this on random kernels and data, 1 to 9 features, 3 to 60 runs; an earlier version
-that repeated scikit-learn's array operations in their order gave the same bits, at 5 to 10
-times the cost a call). Where scikit-learn's would set the kernel's ``theta`` as a side
+do not depend on the BLAS kernels either. They are scikit-learn's to rounding, which
+grows with K's condition number: measured on 600 random kernels and data (1 to 9
+features, 3 to 60 runs), the value within 2.1 × cond(K)·ε of it and the gradient within
+7.7 × cond(K)·ε of its largest component, so to 4e-9 wherever cond(K) < 1e8
+(``tests/gp/test_regressor.py`` holds them within 20 × cond(K)·ε). An earlier version
+that repeated scikit-learn's array operations in their order gave the same bits, at 3 to
+10 times the cost a call. Where scikit-learn's would set the kernel's ``theta`` as a side
 effect, only inside ``fit``'s search is that skipped (its end sets it); any other kernel,
 or call, goes to scikit-learn's implementation unchanged.
 """
