@@ -214,3 +214,8 @@ def test_what_the_fast_path_does_not_take():
         gp.log_marginal_likelihood(np.zeros(6))  # scikit-learn's error for a wrong length
     with pytest.raises(NotFittedError):
         clone(gp).posterior_mean(X)
+    # length scales that are neither one nor one a feature: scikit-learn's error (the
+    # compiled likelihood would have read past theta's end)
+    two = ConstantKernel() * Matern([1.0, 1.0], nu=2.5) + WhiteKernel()
+    with pytest.raises(ValueError, match="same number of dimensions"):
+        Regressor(kernel=two, random_state=0).fit(rng.uniform(size=(10, 6)), np.arange(10.0))
