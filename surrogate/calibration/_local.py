@@ -63,6 +63,7 @@ FIRST_ORDER_CHI2 = 0.25  # …and asks that no step there promise to lower the R
 # a quarter of s² = RSS/(n − p): the optimisation error is then under half a standard
 # deviation of any parameter combination, small against the intervals it reports
 AT_BOUND_UNIT = 1e-6  # trf keeps its iterates strictly inside: within this, at the bound
+BOUND_RTOL = 1e-9  # Ecoat or Scoat within this relative distance of a bound: held there
 _ROUNDS = 4  # rounds whose first-order test found no verified gain, before giving up
 
 
@@ -103,19 +104,44 @@ class FitCoordinates:
         self.log_d = np.log([e.low * self.d_per_gpa(t.low), e.high * self.d_per_gpa(t.high)])
         self.log_m = np.log([s_.low * self.m_per_gpa(t.low), s_.high * self.m_per_gpa(t.high)])
 
+    def _moduli(self, x: np.ndarray) -> list[tuple[int, Any, float]]:
+        """Ecoat and Scoat at fit coordinates ``x`` before their ranges hold them: (index,
+        declared parameter, value [GPa]) each."""
+        tcoat = float(self.t.from_unit(x[self.it]))
+        return [
+            (i, spec, float(np.exp(low + x[i] * (high - low)) / per_gpa(tcoat)))
+            for i, spec, per_gpa, (low, high) in (
+                (self.ie, self.e, self.d_per_gpa, self.log_d),
+                (self.is_, self.s, self.m_per_gpa, self.log_m),
+            )
+        ]
+
     def to_unit(self, x: np.ndarray) -> np.ndarray:
         """Unit coordinates of the declared space at fit coordinates ``x``."""
         unit = np.array(x, dtype=float)
         if not self.coating:
             return unit
-        tcoat = float(self.t.from_unit(x[self.it]))
-        for i, spec, per_gpa, (low, high) in (
-            (self.ie, self.e, self.d_per_gpa, self.log_d),
-            (self.is_, self.s, self.m_per_gpa, self.log_m),
-        ):
-            value = np.exp(low + x[i] * (high - low)) / per_gpa(tcoat)
+        for i, spec, value in self._moduli(x):
             unit[i] = spec.to_unit(np.clip(value, spec.low, spec.high))
         return unit
+
+    def crosses_a_bound(self, x: np.ndarray, shifted: np.ndarray) -> bool:
+        """Whether ``shifted`` would take Ecoat or Scoat past a bound of its range that ``x``
+        lies inside: their range holds them there, so a difference between the two points
+        mixes that bound's kink into the slope (seen: Scoat 0.07 % above its lower bound,
+        a Tcoat step at fixed Mp that would have taken it 0.13 % below — Mp's 95 %
+        interval came out ±64 % where the curves fix it to ±0.034 %; *early-yield-n2*
+        seed 1 of ``benchmarks/calibration.py``, OpenBLAS's Haswell kernels on an AVX-512
+        EPYC). A point at the bound itself (held there) is not inside: its differences
+        are the held ones."""
+        if not self.coating:
+            return False
+        inside = [
+            spec.low * (1 + BOUND_RTOL) < value < spec.high * (1 - BOUND_RTOL)
+            for _, spec, value in self._moduli(x)
+        ]
+        past = [not spec.low <= value <= spec.high for _, spec, value in self._moduli(shifted)]
+        return any(a and b for a, b in zip(inside, past, strict=True))
 
     def from_unit(self, unit: np.ndarray) -> np.ndarray:
         """Fit coordinates of unit coordinates (inverse of :meth:`to_unit` inside the box)."""
@@ -219,16 +245,19 @@ class ResidualModel:
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         """``∂r/∂x``: forward differences of ``fd_step`` in fit coordinates (inwards at a
-        bound, also where Ecoat or Scoat is held at theirs); a column whose shifted run
-        failed is zero."""
+        bound, also where Ecoat or Scoat is held at theirs, and where the step would take
+        one of them past a bound from inside: :meth:`FitCoordinates.crosses_a_bound`); a
+        column whose shifted run failed is zero."""
         residual = self.residual(x)
         jac = np.empty((residual.size, x.size))
         for j in range(x.size):
             step = self.fd_step if x[j] + self.fd_step <= 1.0 else -self.fd_step
             shifted = x.copy()
             shifted[j] += step
-            if np.array_equal(self.point(shifted), self.point(x)):
-                shifted[j] = x[j] - step  # Ecoat or Scoat held at its bound: go inwards
+            if np.array_equal(
+                self.point(shifted), self.point(x)
+            ) or self.coordinates.crosses_a_bound(x, shifted):
+                shifted[j] = x[j] - step  # Ecoat or Scoat held at (or near) its bound: inwards
                 step = -step
             shifted_residual, curves = self.evaluate(shifted)
             jac[:, j] = 0.0 if curves is None else (shifted_residual - residual) / step
