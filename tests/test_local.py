@@ -165,3 +165,19 @@ def test_a_difference_step_takes_no_coat_past_a_bound_it_lies_inside(tmp_path, n
         assert all(spec.low * (1 + 1e-9) < v < spec.high * (1 - 1e-9) for v in values), values
     else:  # held: the point and the Tcoat step (outwards at fixed D or Mp) at the bound
         assert sum(v == pytest.approx(spec.low if side < 0 else spec.high) for v in values) >= 2
+
+
+def test_at_a_corner_a_difference_keeps_its_side_where_the_other_leaves_the_box(tmp_path):
+    """Tcoat at its lower bound and Scoat 0.1 % above its own: the Tcoat step up would take
+    Scoat past its bound, and the step down would leave the box, where the range holds
+    Tcoat and the difference is zero. The step keeps its side: the bound's kink rather
+    than no slope at all."""
+    problem = _problem(tmp_path, 0)
+    names = list(problem.space.names)
+    theta = np.array([TRUTH[n] for n in names])
+    theta[names.index("tcoat_mm")] = problem.space["tcoat_mm"].low
+    theta[names.index("scoat_gpa")] = problem.space["scoat_gpa"].low * 1.001
+    model = ResidualModel(problem, SolverRuns(problem, tmp_path / "cache", jobs=1))
+    jac = model.jacobian(model.pin(theta))
+    norms = np.linalg.norm(jac, axis=0)  # every column a slope, not rounding (an ulp apart)
+    assert np.all(norms > 1e-6 * norms.max()), norms

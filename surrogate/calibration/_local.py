@@ -254,10 +254,11 @@ class ResidualModel:
             step = self.fd_step if x[j] + self.fd_step <= 1.0 else -self.fd_step
             shifted = x.copy()
             shifted[j] += step
-            if np.array_equal(
-                self.point(shifted), self.point(x)
-            ) or self.coordinates.crosses_a_bound(x, shifted):
-                shifted[j] = x[j] - step  # Ecoat or Scoat held at (or near) its bound: inwards
+            held = np.array_equal(self.point(shifted), self.point(x))
+            if held or (  # …or near its bound, where the other side lies within the box
+                self.coordinates.crosses_a_bound(x, shifted) and 0.0 <= x[j] - step <= 1.0
+            ):
+                shifted[j] = x[j] - step  # Ecoat or Scoat held at its bound: inwards
                 step = -step
             shifted_residual, curves = self.evaluate(shifted)
             jac[:, j] = 0.0 if curves is None else (shifted_residual - residual) / step
