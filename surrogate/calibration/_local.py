@@ -246,7 +246,8 @@ class ResidualModel:
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         """``∂r/∂x``: forward differences of ``fd_step`` in fit coordinates (inwards at a
         bound, also where Ecoat or Scoat is held at theirs, and where the step would take
-        one of them past a bound from inside: :meth:`FitCoordinates.crosses_a_bound`); a
+        one of them past a bound from inside, :meth:`FitCoordinates.crosses_a_bound`, unless
+        the inward step would leave the box: at such a corner the forward step stays); a
         column whose shifted run failed is zero."""
         residual = self.residual(x)
         jac = np.empty((residual.size, x.size))
