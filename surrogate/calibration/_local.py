@@ -63,7 +63,6 @@ FIRST_ORDER_CHI2 = 0.25  # …and asks that no step there promise to lower the R
 # a quarter of s² = RSS/(n − p): the optimisation error is then under half a standard
 # deviation of any parameter combination, small against the intervals it reports
 AT_BOUND_UNIT = 1e-6  # trf keeps its iterates strictly inside: within this, at the bound
-BOUND_RTOL = 1e-9  # Ecoat or Scoat within this relative distance of a bound: held there
 _ROUNDS = 4  # rounds whose first-order test found no verified gain, before giving up
 
 
@@ -132,16 +131,15 @@ class FitCoordinates:
         a Tcoat step at fixed Mp that would have taken it 0.13 % below — Mp's 95 %
         interval came out ±64 % where the curves fix it to ±0.034 %; *early-yield-n2*
         seed 1 of ``benchmarks/calibration.py``, OpenBLAS's Haswell kernels on an AVX-512
-        EPYC). A point at the bound itself (held there) is not inside: its differences
-        are the held ones."""
+        EPYC). A point at the bound (:func:`bound_sides`, as the statistics judge it: held
+        there) is not inside: its differences are the held ones."""
         if not self.coating:
             return False
-        inside = [
-            spec.low * (1 + BOUND_RTOL) < value < spec.high * (1 - BOUND_RTOL)
-            for _, spec, value in self._moduli(x)
-        ]
-        past = [not spec.low <= value <= spec.high for _, spec, value in self._moduli(shifted)]
-        return any(a and b for a, b in zip(inside, past, strict=True))
+        sides = bound_sides(self.to_unit(x))
+        return any(
+            sides[i] == 0 and not spec.low <= value <= spec.high
+            for i, spec, value in self._moduli(shifted)
+        )
 
     def from_unit(self, unit: np.ndarray) -> np.ndarray:
         """Fit coordinates of unit coordinates (inverse of :meth:`to_unit` inside the box)."""
