@@ -396,16 +396,32 @@ class _Worker:
             beat.stop()
             self._requeue(trial)
             return
+        except optuna.exceptions.UpdateFinishedTrialError:
+            beat.stop()
+            self._judged_stale(trial)
+            return
         except BaseException:
             beat.stop()
             raise
         beat.stop()
-        trial.set_user_attr("input_hash", queued)
         try:
+            trial.set_user_attr("input_hash", queued)
             record = tell_verification(self.study, trial, self.spec, params, result)
         except optuna.exceptions.UpdateFinishedTrialError:
-            return  # judged stale meanwhile; its queued copy takes the cached result
+            self._judged_stale(trial)
+            return
         self._count(trial.number, record)
+
+    def _judged_stale(self, trial: optuna.Trial) -> None:
+        """Another worker failed this live trial as stale (its heartbeats could not be
+        written in time) and queued a copy, which takes the cached result if there is one."""
+        if self.progress:
+            logger.info(
+                "[%s] trial %d: judged stale by another worker while running; "
+                "its queued copy takes the result",
+                self.spec.name,
+                trial.number,
+            )
 
     def _result(self, key: str, inputs: dict[str, Any]) -> dict[str, Any]:
         result = self.cache.get(key)

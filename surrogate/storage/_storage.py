@@ -5,7 +5,9 @@ Accepted storage URLs:
 - ``postgresql://user@host:port/db`` (also ``postgres://``; run with psycopg 3,
   i.e. ``postgresql+psycopg://``) — many machines;
 - ``journal:///path/to/study.log`` or a plain path ending in ``.log`` — Optuna's
-  journal file (``JournalFileBackend``), one machine or a shared NFS folder;
+  journal file (``JournalFileBackend``), one machine or a shared NFS folder; its
+  writers take a kernel lock that dies with its holder before Optuna's symlink lock
+  (:mod:`surrogate.storage._lock`);
 - ``sqlite:///path.db`` — one worker only: SQLite hands the same enqueued trial
   to two workers (a race in ``study.ask``), so more than one is refused;
 - any other SQLAlchemy URL Optuna's ``RDBStorage`` accepts (``mysql+pymysql://``).
@@ -44,6 +46,7 @@ from optuna.trial import FrozenTrial, TrialState
 
 from .._errors import InputDataError
 from .._pool import check_jobs
+from ._lock import JournalLock
 
 __all__ = [
     "StorageError",
@@ -278,7 +281,7 @@ def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool =
     with storage_errors(url):
         if path is not None:
             return _HeartbeatJournalStorage(
-                JournalFileBackend(str(path)),
+                JournalFileBackend(str(path), lock_obj=JournalLock(str(path))),
                 heartbeat_s=heartbeat_s,
                 grace_s=grace,
                 callback=retry,

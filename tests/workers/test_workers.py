@@ -22,7 +22,7 @@ import pytest
 from surrogate.identify._doe import make_design
 from surrogate.identify._verify import enqueue, open_verify_study
 from surrogate.identify._worker import work
-from surrogate.storage._storage import open_storage
+from surrogate.storage._storage import MAX_RETRY, open_storage
 from surrogate.study._spec import load_study
 from tests.workers.fixed_cost import FixedCostSolve, events
 
@@ -133,6 +133,58 @@ def test_sigkilled_worker_costs_one_run_redone_once(study_file, storage_url, tmp
     dones = collections.Counter(k for e, k, _ in events(log) if e == "done")
     assert starts == {k: 2 if k == killed else 1 for k in keys}
     assert dones == dict.fromkeys(keys, 1)
+
+
+def test_a_writer_killed_inside_the_journal_lock_makes_no_live_trial_stale(study_file, tmp_path):
+    """A killed writer's symlink lock, left where the workers' heartbeats must pass: with
+    Optuna's lock alone they stood still for its 30 s grace, and a live trial was failed
+    as stale and run again (surrogate.storage._lock)."""
+    journal = tmp_path / "study.log"
+    storage_url = f"journal://{journal}"
+    keys = _plan(study_file, storage_url, 6)
+    log = tmp_path / "solver.log"
+    workers = [_worker(study_file, storage_url, log, 2.0) for _ in range(2)]  # 1 s heartbeat
+    _wait_for(lambda: len([e for e, _, _ in events(log) if e == "start"]) >= 2)
+    os.symlink(journal, f"{journal}.lock")  # as a writer SIGKILLed while appending leaves it
+    _wait_all(workers)
+    trials = _trials(study_file, storage_url)
+    assert [t.state for t in trials] == [TrialState.COMPLETE] * len(keys)
+    starts = collections.Counter(k for e, k, _ in events(log) if e == "start")
+    assert starts == dict.fromkeys(keys, 1)
+
+
+def test_a_worker_whose_live_trial_is_judged_stale_goes_on_and_repeats_no_run(study_file, tmp_path):
+    """Another worker fails a live trial as stale (its heartbeats were not written in
+    time: a lock a killed writer left, an unreachable database) and queues a copy, as
+    ``optuna.storages.fail_stale_trials`` does. The worker that ran it goes on (it
+    stopped with UpdateFinishedTrialError before), and the copy takes the cached result."""
+    storage_url = f"journal://{tmp_path / 'study.log'}"
+    keys = _plan(study_file, storage_url, 3)
+    spec = load_study(study_file)
+    storage = open_storage(storage_url)
+    study = optuna.load_study(study_name=f"{spec.name}/verify", storage=storage)
+    log = tmp_path / "solver.log"
+    fixed = FixedCostSolve(log, 0.0)
+    judged: list[int] = []
+
+    def solve(inputs):
+        if not judged:
+            (running,) = study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
+            assert storage.set_trial_state_values(running._trial_id, state=TrialState.FAIL)
+            optuna.storages.RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)(
+                study, storage.get_trial(running._trial_id)
+            )
+            judged.append(running.number)
+        return fixed(inputs)
+
+    result = work(study_file, storage=storage_url, idle_timeout_s=0.0, solve=solve, progress=False)
+    trials = _trials(study_file, storage_url)
+    assert [t.number for t in trials if t.state == TrialState.FAIL] == judged
+    complete = [t for t in trials if t.state == TrialState.COMPLETE]
+    assert sorted(t.user_attrs["input_hash"] for t in complete) == sorted(keys)
+    starts = collections.Counter(k for e, k, _ in events(log) if e == "start")
+    assert starts == dict.fromkeys(keys, 1)
+    assert result.runs == len(keys)
 
 
 def test_sigterm_fails_the_trial_and_another_worker_redoes_it(study_file, storage_url, tmp_path):
