@@ -800,6 +800,12 @@ def _add_worker(commands: _Subparsers) -> argparse.ArgumentParser:
         default=60.0,
         help="s to wait for new trials once none is queued or running (default 60)",
     )
+    worker.add_argument(
+        "--storage-patience",
+        type=float,
+        help="s to keep trying a database that could be reached and cannot any more (a "
+        "restart, a failover) before stopping (default 300)",
+    )
     _add_json(worker)
     return worker
 
@@ -813,6 +819,7 @@ def _worker(args: argparse.Namespace) -> int:
         jobs=args.jobs,
         heartbeat_s=args.heartbeat,
         idle_timeout_s=args.idle_timeout,
+        **({} if args.storage_patience is None else {"storage_patience_s": args.storage_patience}),
         progress=not args.json,
     )
     if args.json:

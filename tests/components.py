@@ -18,7 +18,7 @@ import sys
 import tempfile
 import time
 import urllib.request
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -106,9 +106,19 @@ def throwaway_postgres() -> Iterator[str]:
             f"-c listen_addresses=127.0.0.1 -p {port} -k {folder} "
             "-c fsync=off -c synchronous_commit=off -c full_page_writes=off"
         )
-        run("pg_ctl", "-D", str(data), "-o", options, "-l", str(folder / "log"), "-w", "start")
-        yield f"postgresql://surrogate@127.0.0.1:{port}"
+
+        def start() -> None:
+            run("pg_ctl", "-D", str(data), "-o", options, "-l", str(folder / "log"), "-w", "start")
+
+        start()
+        url = f"postgresql://surrogate@127.0.0.1:{port}"
+        _CONTROLS[url] = {
+            "start": start,
+            "stop": lambda: run("pg_ctl", "-D", str(data), "-w", "stop"),
+        }
+        yield url
     finally:
+        _CONTROLS.pop(f"postgresql://surrogate@127.0.0.1:{port}", None)
         if (data / "postmaster.pid").exists():
             subprocess.run(
                 _as_server_user(
@@ -118,6 +128,15 @@ def throwaway_postgres() -> Iterator[str]:
                 timeout=60,
             )
         shutil.rmtree(folder, ignore_errors=True)
+
+
+_CONTROLS: dict[str, dict[str, Callable[[], None]]] = {}
+
+
+def postgres_control(server_url: str, action: str) -> None:
+    """``stop`` (fast shutdown: sessions are cut) or ``start`` again a server that
+    :func:`throwaway_postgres` started in this process."""
+    _CONTROLS[server_url][action]()
 
 
 def create_database(server_url: str, name: str) -> str:

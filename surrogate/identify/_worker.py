@@ -12,7 +12,9 @@ stale, the next worker that looks fails it and
 ``RetryHeartbeatStaleTrialCallback`` queues a copy, so the run is redone once
 (from the cache when the dead worker had finished solving). SIGTERM (or Ctrl-C)
 during a solve fails the trial, queues its copy and exits. A solver failure is a
-``FAIL`` trial with its ``reason``; the loop goes on.
+``FAIL`` trial with its ``reason``; the loop goes on. A database that cannot be
+reached for a while (a restart, a failover) is waited for, up to the storage
+patience, while the solve goes on (:class:`surrogate.storage._storage.Patience`).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -38,10 +41,12 @@ from ..solvers._cache import ResultCache, input_hash
 from ..storage._optuna import quiet_optuna, suggest
 from ..storage._storage import (
     MAX_RETRY,
+    STORAGE_PATIENCE_S,
+    Patience,
     check_workers,
     open_storage,
-    stale_trial_check,
     storage_errors,
+    unreachable,
 )
 from ..study._spec import StudySpec, load_study
 from ._objective import refuse_model_effects
@@ -101,6 +106,7 @@ class WorkerDispatcher:
         *,
         jobs: int,
         heartbeat_s: int = HEARTBEAT_S,
+        storage_patience_s: float = STORAGE_PATIENCE_S,
         solve: Solve = solve_inputs,
         progress: bool = True,
     ) -> None:
@@ -108,6 +114,7 @@ class WorkerDispatcher:
         self.storage = storage
         self.jobs = jobs
         self.heartbeat_s = heartbeat_s
+        self.patience = Patience(storage, storage_patience_s, grace_s=3 * heartbeat_s)
         self.solve = solve
         self.progress = progress
 
@@ -123,6 +130,7 @@ class WorkerDispatcher:
                 jobs=max(1, min(self.jobs, todo)),
                 heartbeat_s=self.heartbeat_s,
                 idle_timeout_s=0.0,
+                storage_patience_s=self.patience.patience_s,
                 solve=self.solve,
                 progress=False,
             )
@@ -140,10 +148,10 @@ class WorkerDispatcher:
         """Until every run of ``keys`` is over; says what it waits for every heartbeat."""
         wanted, said = set(keys), time.monotonic()
         while True:
-            records = finished_records(study, wanted)
+            records = self.patience(lambda: finished_records(study, wanted))
             if len(records) == len(wanted):
                 return records
-            stale_trial_check(study)
+            self.patience.stale_check(study)
             if self.progress and time.monotonic() - said >= self.heartbeat_s:
                 said = time.monotonic()
                 open_keys = wanted - records.keys()
@@ -177,6 +185,7 @@ def work(
     jobs: int = 1,
     heartbeat_s: int = HEARTBEAT_S,
     idle_timeout_s: float = 60.0,
+    storage_patience_s: float = STORAGE_PATIENCE_S,
     solve: Solve = solve_inputs,
     progress: bool = True,
 ) -> WorkerResult:
@@ -195,6 +204,9 @@ def work(
         Heartbeat interval [s]; a trial silent for three intervals is retried.
     idle_timeout_s : float
         Wait this long for new trials once the queue is empty and nothing runs.
+    storage_patience_s : float
+        Once connected, ride out a database that cannot be reached for this long
+        (a restart, a failover) before stopping with a one-line error.
     solve : callable
         The full solver on :func:`surrogate.identify._verify.verification_inputs`
         (tests pass a cheap stand-in here; a study file cannot).
@@ -207,17 +219,17 @@ def work(
     check_workers(storage, jobs)
     if not isinstance(idle_timeout_s, int | float) or not idle_timeout_s >= 0:
         raise InputDataError(f"--idle-timeout must be ≥ 0 s, got {idle_timeout_s!r}")
+    Patience(storage, storage_patience_s, grace_s=0)  # checks it
     quiet_optuna()
     if progress:
         show_progress()
-    worker = _Worker(spec, storage, heartbeat_s=heartbeat_s, solve=solve, progress=progress)
+    options: dict[str, Any] = {"heartbeat_s": heartbeat_s, "patience_s": storage_patience_s}
+    worker = _Worker(spec, storage, **options, solve=solve, progress=progress)
     if jobs == 1:
         counts = worker.loop(idle_timeout_s)
     else:
         worker.close()
-        counts = _work_in_processes(
-            spec, storage, jobs, heartbeat_s, idle_timeout_s, solve, progress
-        )
+        counts = _work_in_processes(spec, storage, jobs, options, idle_timeout_s, solve, progress)
     return WorkerResult(verify_study_name(spec), storage, jobs, **counts)
 
 
@@ -225,7 +237,7 @@ def _work_in_processes(
     spec: StudySpec,
     storage: str,
     jobs: int,
-    heartbeat_s: int,
+    options: dict[str, Any],
     idle_timeout_s: float,
     solve: Solve,
     progress: bool,
@@ -238,7 +250,7 @@ def _work_in_processes(
     processes = [
         context.Process(
             target=_process_main,
-            args=(results, spec, storage, heartbeat_s, idle_timeout_s, solve, progress),
+            args=(results, spec, storage, options, idle_timeout_s, solve, progress),
         )
         for _ in range(jobs)
     ]
@@ -275,14 +287,14 @@ def _process_main(
     results: Any,
     spec: StudySpec,
     storage: str,
-    heartbeat_s: int,
+    options: dict[str, Any],
     idle_timeout_s: float,
     solve: Solve,
     progress: bool,
 ) -> None:
     one_blas_thread()
     quiet_optuna()
-    worker = _Worker(spec, storage, heartbeat_s=heartbeat_s, solve=solve, progress=progress)
+    worker = _Worker(spec, storage, **options, solve=solve, progress=progress)
     results.put(worker.loop(idle_timeout_s))
 
 
@@ -290,7 +302,14 @@ class _Worker:
     """One worker process: claim, heartbeat, solve (through the cache), tell."""
 
     def __init__(
-        self, spec: StudySpec, storage: str, *, heartbeat_s: int, solve: Solve, progress: bool
+        self,
+        spec: StudySpec,
+        storage: str,
+        *,
+        heartbeat_s: int,
+        patience_s: float,
+        solve: Solve,
+        progress: bool,
     ) -> None:
         self.url = storage
         # get_storage: the study and this worker share one (cached) storage object
@@ -324,6 +343,9 @@ class _Worker:
         }
         self._solving = False
         self._stop: str | None = None
+        self.patience = Patience(
+            storage, patience_s, grace_s=3 * heartbeat_s, stopping=lambda: self._stop is not None
+        )
 
     def close(self) -> None:
         engine = getattr(getattr(self.storage, "_backend", self.storage), "engine", None)
@@ -338,12 +360,14 @@ class _Worker:
             with storage_errors(self.url):
                 idle_since = time.monotonic()
                 while self._stop is None:
-                    stale_trial_check(self.study)
+                    self.patience.stale_check(self.study)
                     trial_id = self._claim()
                     if trial_id is not None:
                         self._run(trial_id)
                         idle_since = time.monotonic()
-                    elif self._running():  # idle only once nothing is queued or running
+                    elif self.patience(
+                        self._running
+                    ):  # idle only once nothing is queued or running
                         idle_since = time.monotonic()
                         time.sleep(POLL_S)
                     elif time.monotonic() - idle_since < idle_timeout_s:
@@ -363,14 +387,22 @@ class _Worker:
             raise _Interrupted(self._stop)
 
     def _claim(self) -> int | None:
-        """Move one WAITING trial to RUNNING for this worker (the storage arbitrates)."""
-        for trial in self.storage.get_all_trials(
-            self.study_id, deepcopy=False, states=(TrialState.WAITING,)
-        ):
+        """Move one WAITING trial to RUNNING for this worker (the storage arbitrates).
+
+        A claim retried after its answer was lost finds the trial RUNNING and moves on;
+        that trial, never beating, goes stale and is queued again."""
+        waiting = self.patience(
+            lambda: self.storage.get_all_trials(
+                self.study_id, deepcopy=False, states=(TrialState.WAITING,)
+            )
+        )
+        for trial in waiting:
+            trial_id = trial._trial_id
             try:
-                if self.storage.set_trial_state_values(trial._trial_id, state=TrialState.RUNNING):
-                    self.storage.record_heartbeat(trial._trial_id)
-                    return trial._trial_id
+                claim = partial(self.storage.set_trial_state_values, trial_id, TrialState.RUNNING)
+                if self.patience(claim):
+                    self.patience(partial(self.storage.record_heartbeat, trial_id))
+                    return trial_id
             except optuna.exceptions.UpdateFinishedTrialError:
                 continue
         return None
@@ -382,10 +414,10 @@ class _Worker:
 
     def _run(self, trial_id: int) -> None:
         trial = optuna.Trial(self.study, trial_id)
-        beat = _HeartbeatThread(self.storage, trial_id, self.heartbeat_s)
+        beat = _HeartbeatThread(self.storage, trial_id, self.heartbeat_s, self.patience)
         beat.start()
         try:
-            params = suggest(trial, self.spec.space)
+            params = self.patience(lambda: suggest(trial, self.spec.space))
             inputs = verification_inputs(self.spec, params)
             key = input_hash(inputs)
             queued = trial.user_attrs.get("input_hash", key)
@@ -404,9 +436,13 @@ class _Worker:
             beat.stop()
             raise
         beat.stop()
-        try:
+
+        def tell() -> Verification:
             trial.set_user_attr("input_hash", queued)
-            record = tell_verification(self.study, trial, self.spec, params, result)
+            return tell_verification(self.study, trial, self.spec, params, result)
+
+        try:
+            record = self.patience(tell)
         except optuna.exceptions.UpdateFinishedTrialError:
             self._judged_stale(trial)
             return
@@ -483,10 +519,11 @@ _OTHER_INPUTS = {
 class _HeartbeatThread:
     """Records the trial's heartbeat every ``interval_s`` until stopped."""
 
-    def __init__(self, storage: Any, trial_id: int, interval_s: int) -> None:
+    def __init__(self, storage: Any, trial_id: int, interval_s: int, patience: Patience) -> None:
         self._storage = storage
         self._trial_id = trial_id
         self._interval_s = interval_s
+        self._patience = patience
         self._stopped = threading.Event()
         self._thread = threading.Thread(target=self._beat, daemon=True)
 
@@ -503,5 +540,7 @@ class _HeartbeatThread:
                 self._storage.record_heartbeat(self._trial_id)
             except optuna.exceptions.UpdateFinishedTrialError:
                 return  # failed as stale by another worker: nothing to keep alive
-            except Exception:  # a storage hiccup: the next beat retries
+            except Exception as error:  # a storage hiccup: the next beat retries
+                if unreachable(error):
+                    self._patience.failed()  # judge no one stale until it is over
                 continue

@@ -26,12 +26,13 @@ from __future__ import annotations
 import contextlib
 import datetime
 import errno
+import logging
 import os
 import time
 import weakref
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import optuna
 from optuna.storages import (
@@ -49,6 +50,8 @@ from .._pool import check_jobs
 from ._lock import JournalLock
 
 __all__ = [
+    "STORAGE_PATIENCE_S",
+    "Patience",
     "StorageError",
     "check_storage_url",
     "check_workers",
@@ -60,6 +63,7 @@ __all__ = [
     "refuse_in_memory",
     "storage_error_message",
     "storage_kind",
+    "unreachable",
     "unstored",
 ]
 
@@ -450,3 +454,123 @@ def stale_trial_check(study: optuna.Study) -> None:
     """Fail stale trials (their copies are queued again by the retry callback)."""
     with _quiet_experimental():
         optuna.storages.fail_stale_trials(study)
+
+
+# -- a storage that cannot be reached for a while --------------------------------------------
+STORAGE_PATIENCE_S = 300.0
+"""How long [s] a worker, or a planner waiting for workers, rides out a storage it reached
+before and cannot reach now (a database restart, a failover) before it stops."""
+
+_RETRY_S = (1.0, 10.0)  # first and longest wait between tries (at most a third of the grace)
+_T = TypeVar("_T")
+logger = logging.getLogger(__name__)
+
+
+def unreachable(error: BaseException) -> bool:
+    """Whether ``error`` says the database could not be reached — refused, dropped or shut
+    down, which a restart or a failover ends — rather than that it refused the operation
+    (read-only, full, no such database): a psycopg ``OperationalError`` without a SQLSTATE
+    (the connection's own failure) or of class 08 (connection exception) or 57P (operator
+    intervention), found anywhere in the error's chain of causes."""
+    try:
+        from psycopg import OperationalError
+    except ImportError:
+        return False
+    seen: set[int] = set()
+    cause: BaseException | None = error
+    while cause is not None and id(cause) not in seen:
+        seen.add(id(cause))
+        if isinstance(cause, OperationalError):
+            state = cause.sqlstate
+            return state is None or state.startswith(("08", "57P"))
+        cause = cause.__cause__ or getattr(cause, "orig", None) or cause.__context__
+    return False
+
+
+class Patience:
+    """Rides out a storage that cannot be reached for up to ``patience_s``.
+
+    ``patience(step)`` calls ``step`` and, while it fails because the storage cannot be
+    reached (:func:`unreachable`), calls it again with growing waits; after
+    ``patience_s`` of failures (or once ``stopping()``), the failure is raised as a
+    :class:`StorageError` that says how long the storage was unreachable. Any other
+    error is raised at once. A step is retried whole, so it must be safe to repeat
+    (reads, and writes that say so when they were done already).
+
+    A process that could not reach the storage within the last ``grace_s`` does not
+    judge other workers' trials stale (:meth:`stale_check`): their heartbeats could not
+    be written either, and a live trial failed as stale is run twice. The waits between
+    tries are at most a third of the grace, so every worker is back (and has beaten or
+    told) within a third of the grace after the storage is.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        patience_s: float = STORAGE_PATIENCE_S,
+        *,
+        grace_s: float,
+        stopping: Callable[[], bool] = lambda: False,
+    ) -> None:
+        if isinstance(patience_s, bool) or not isinstance(patience_s, int | float):
+            raise InputDataError(
+                f"--storage-patience must be a number of seconds, got {patience_s!r}"
+            )
+        if not patience_s >= 0:
+            raise InputDataError(f"--storage-patience must be ≥ 0 s, got {patience_s!r}")
+        self.url = url
+        self.patience_s = float(patience_s)
+        self.grace_s = grace_s
+        self.stopping = stopping
+        self._last_failure = -float("inf")
+
+    def failed(self) -> None:
+        """Note a failure to reach the storage seen elsewhere (a heartbeat thread)."""
+        self._last_failure = time.monotonic()
+
+    def __call__(self, step: Callable[[], _T]) -> _T:
+        since = None
+        longest = max(0.1, min(_RETRY_S[1], self.grace_s / 3))
+        wait_s = min(_RETRY_S[0], longest)
+        while True:
+            try:
+                result = step()
+            except Exception as error:
+                if not unreachable(error):
+                    raise
+                self.failed()
+                if since is None:
+                    since = self._last_failure
+                    logger.warning(
+                        "the storage %s cannot be reached; trying again for up to %g s "
+                        "(--storage-patience)",
+                        redacted_url(self.url),
+                        self.patience_s,
+                    )
+                waited = time.monotonic() - since
+                if waited >= self.patience_s or self.stopping():
+                    reason = storage_error_message(error, self.url) or str(error)
+                    raise StorageError(
+                        f"{reason} (unreachable for {waited:.0f} s; --storage-patience "
+                        f"{self.patience_s:g} s)"
+                    ) from error
+                self._sleep(min(wait_s, self.patience_s - waited))
+                wait_s = min(2 * wait_s, longest)
+                continue
+            if since is not None:
+                logger.warning(
+                    "the storage %s is back after %.0f s",
+                    redacted_url(self.url),
+                    time.monotonic() - since,
+                )
+            return result
+
+    def _sleep(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while not self.stopping() and time.monotonic() < end:
+            time.sleep(min(0.2, max(0.0, end - time.monotonic())))
+
+    def stale_check(self, study: optuna.Study) -> None:
+        """:func:`stale_trial_check`, unless the storage was unreachable within the grace."""
+        if time.monotonic() - self._last_failure > self.grace_s:
+            self(lambda: stale_trial_check(study))

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import itertools
 import os
+import shutil
 import subprocess
+from pathlib import Path
 
 import pytest
 
 from tests.components import ComponentMissing, create_database, missing, throwaway_postgres
 
 _databases = itertools.count()
+STUDIES = Path(__file__).resolve().parents[2] / "studies"
 
 
 @pytest.fixture(scope="session")
@@ -41,3 +44,11 @@ def storage_url(request, tmp_path):
     if request.param == "journal":
         return f"journal://{tmp_path / 'study.log'}"
     return request.getfixturevalue("postgres_url")
+
+
+@pytest.fixture
+def study_file(tmp_path):
+    """The shipped paper study, copied (its folder holds the cache and the storage)."""
+    path = tmp_path / "paper_coating.toml"
+    shutil.copy(STUDIES / "paper_coating.toml", path)
+    return path

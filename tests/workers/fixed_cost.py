@@ -5,7 +5,8 @@ study file. Each call appends ``start <hash> <pid>`` and ``done <hash> <pid>``
 to a log, so a test counts how often every run was started and finished.
 
 Run as a worker: ``python -m tests.workers.fixed_cost STUDY STORAGE LOG COST_S
-[JOBS] [HEARTBEAT_S] [--idle-timeout S] [--pause-at-first-heartbeat MARKER]``.
+[JOBS] [HEARTBEAT_S] [--idle-timeout S] [--storage-patience S]
+[--pause-at-first-heartbeat MARKER]``.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from surrogate.solvers._cache import input_hash
+from surrogate.storage._storage import STORAGE_PATIENCE_S
 
 
 class FixedCostSolve:
@@ -103,6 +105,7 @@ def main(argv: list[str]) -> int:
     parser.add_argument("jobs", type=int, nargs="?", default=1)
     parser.add_argument("heartbeat_s", type=int, nargs="?", default=1)
     parser.add_argument("--idle-timeout", type=float, default=0.0)
+    parser.add_argument("--storage-patience", type=float, default=STORAGE_PATIENCE_S)
     parser.add_argument("--pause-at-first-heartbeat", metavar="MARKER")
     args = parser.parse_args(argv)
     if args.pause_at_first_heartbeat:
@@ -113,6 +116,7 @@ def main(argv: list[str]) -> int:
         jobs=args.jobs,
         heartbeat_s=args.heartbeat_s,
         idle_timeout_s=args.idle_timeout,
+        storage_patience_s=args.storage_patience,
         solve=FixedCostSolve(args.log, args.cost_s),
         progress=False,
     )

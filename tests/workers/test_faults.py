@@ -30,8 +30,9 @@ import signal
 import optuna
 import pytest
 
+from tests.workers.conftest import STUDIES
 from tests.workers.fixed_cost import FixedCostSolve, events
-from tests.workers.test_workers import STUDIES, _process, _trials, _wait_for
+from tests.workers.test_workers import _process, _trials, _wait_for
 from tests.workers.test_workers import _worker as worker_process
 
 pytestmark = pytest.mark.slow

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import collections
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -27,16 +26,9 @@ from surrogate.study._spec import load_study
 from tests.workers.fixed_cost import FixedCostSolve, events
 
 REPO = Path(__file__).resolve().parents[2]
-STUDIES = REPO / "studies"
+
 pytestmark = pytest.mark.slow
 TrialState = optuna.trial.TrialState
-
-
-@pytest.fixture
-def study_file(tmp_path):
-    path = tmp_path / "paper_coating.toml"
-    shutil.copy(STUDIES / "paper_coating.toml", path)
-    return path
 
 
 def _plan(study_file, storage_url, n):

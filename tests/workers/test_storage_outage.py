@@ -1,0 +1,101 @@
+"""A database that cannot be reached for a while: workers wait for it (the storage
+patience), the solve goes on, and no run is repeated; past the patience a worker stops
+with one line saying so. Real PostgreSQL servers, stopped and started again."""
+
+from __future__ import annotations
+
+import collections
+import time
+
+import optuna
+import psycopg
+import pytest
+import sqlalchemy.exc
+
+from surrogate.storage._storage import unreachable
+from tests.components import ComponentMissing, create_database, missing, postgres_control
+from tests.components import throwaway_postgres as _throwaway_postgres
+from tests.workers.fixed_cost import events
+from tests.workers.test_workers import _plan, _trials, _wait_for, _worker
+
+TrialState = optuna.trial.TrialState
+
+
+@pytest.fixture
+def server():
+    """A server of this test's own, so stopping it touches no other test."""
+    try:
+        with _throwaway_postgres() as url:
+            yield url
+    except ComponentMissing as error:
+        missing(str(error))
+
+
+def _finish(processes, timeout=120):
+    """Return codes and stderr of each process, once it ends."""
+    return [(p.communicate(timeout=timeout)[1], p.returncode) for p in processes]
+
+
+@pytest.mark.slow
+def test_workers_ride_out_a_database_restart_and_repeat_no_run(server, tmp_path, study_file):
+    url = create_database(server, "outage")
+    keys = _plan(study_file, url, 6)
+    log = tmp_path / "solver.log"
+    workers = [_worker(study_file, url, log, 2.0) for _ in range(2)]  # 1 s heartbeat, 3 s grace
+    _wait_for(lambda: len([e for e, _, _ in events(log) if e == "start"]) >= 2)
+    postgres_control(server, "stop")  # mid-solve: both runs take 2 s
+    _wait_for(lambda: len([e for e, _, _ in events(log) if e == "done"]) >= 2)
+    time.sleep(5)  # longer than the grace: every heartbeat is stale by now
+    postgres_control(server, "start")
+    for stderr, code in _finish(workers):
+        assert code == 0, stderr
+        assert "cannot be reached" in stderr and "is back after" in stderr
+    trials = _trials(study_file, url)
+    assert [t.state for t in trials] == [TrialState.COMPLETE] * len(keys)
+    starts = collections.Counter(k for e, k, _ in events(log) if e == "start")
+    assert starts == dict.fromkeys(keys, 1)
+
+
+@pytest.mark.slow
+def test_past_its_patience_a_worker_stops_with_one_line(server, tmp_path, study_file):
+    url = create_database(server, "gone")
+    _plan(study_file, url, 4)
+    log = tmp_path / "solver.log"
+    worker = _worker(study_file, url, log, 1.0, options=(1, "--storage-patience", 2))
+    _wait_for(lambda: events(log))
+    postgres_control(server, "stop")
+    ((stderr, code),) = _finish([worker])
+    assert code != 0
+    last = stderr.strip().splitlines()[-1]
+    assert "cannot use the storage" in last and "--storage-patience 2 s" in last, stderr
+
+
+def _chained(error):
+    """``error`` as Optuna's RDB storage raises it: SQLAlchemy's error, from the driver's."""
+    try:
+        try:
+            raise error
+        except psycopg.Error as driver:
+            raise sqlalchemy.exc.OperationalError("SELECT 1", {}, driver) from driver
+    except sqlalchemy.exc.SQLAlchemyError as wrapped:
+        try:
+            raise optuna.exceptions.StorageInternalError("An exception is raised") from wrapped
+        except optuna.exceptions.StorageInternalError as outer:
+            return outer
+
+
+@pytest.mark.parametrize(
+    ("error", "expected"),
+    [
+        (psycopg.OperationalError("connection failed: Connection refused"), True),
+        (psycopg.errors.AdminShutdown(), True),  # 57P01: the server is shutting down
+        (psycopg.errors.ConnectionFailure(), True),  # 08006
+        (psycopg.errors.DiskFull(), False),  # 53100: waiting will not free it
+        (psycopg.errors.ReadOnlySqlTransaction(), False),
+        (psycopg.errors.InvalidCatalogName(), False),  # no such database
+    ],
+)
+def test_only_a_database_that_cannot_be_reached_is_waited_for(error, expected):
+    assert unreachable(error) is expected
+    assert unreachable(_chained(error)) is expected
+    assert unreachable(OSError("disk full")) is False
