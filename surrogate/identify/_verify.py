@@ -20,6 +20,7 @@ values (``≤ 0`` feasible), F60, θsat and the curve.
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import hashlib
 import json
 import logging
@@ -30,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import optuna
+from optuna.storages import RetryHeartbeatStaleTrialCallback
 from optuna.trial import FrozenTrial, TrialState
 
 from .._errors import InputDataError
@@ -238,6 +240,31 @@ def enqueue(
 
 def _trial_attrs(spec: StudySpec, key: str, phase: str) -> dict[str, str]:
     return {"input_hash": key, "phase": phase, "plan": plan_of(spec)}
+
+
+def queue_lost_copies(study: optuna.Study, settled_s: float) -> None:
+    """Queue the copy of a trial failed as stale whose copy was never queued.
+
+    ``optuna.storages.fail_stale_trials`` fails a stale trial and then queues its copy,
+    in two steps; a judge killed, or cut off from the storage, between them left a
+    FAIL trial that :func:`retry_pending` counts on a copy that never came, and the
+    planner waited for it for ever. Only trials failed more than ``settled_s`` ago are
+    copied, so a judge still at work does not see its trial copied twice. (A copy names
+    the trials it copies in ``retry_history``; a solver failure has a ``reason``.)
+    """
+    trials = study.get_trials(deepcopy=False)
+    copied = {number for t in trials for number in t.system_attrs.get("retry_history", [])}
+    now = datetime.datetime.now()  # the clock datetime_complete was written with
+    for trial in trials:
+        if (
+            trial.state == TrialState.FAIL
+            and "reason" not in trial.user_attrs
+            and retry_pending(trial)
+            and trial.number not in copied
+            and trial.datetime_complete is not None
+            and (now - trial.datetime_complete).total_seconds() > settled_s
+        ):
+            RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)(study, trial)
 
 
 def retry_pending(trial: FrozenTrial) -> bool:

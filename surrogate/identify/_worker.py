@@ -55,6 +55,8 @@ from ._verify import (
     as_planned,
     enqueue,
     finished_records,
+    queue_lost_copies,
+    record_of,
     tell_verification,
     verification_inputs,
     verify_study_name,
@@ -151,7 +153,7 @@ class WorkerDispatcher:
             records = self.patience(lambda: finished_records(study, wanted))
             if len(records) == len(wanted):
                 return records
-            self.patience.stale_check(study)
+            _judge_stale(self.patience, study, self.heartbeat_s)
             if self.progress and time.monotonic() - said >= self.heartbeat_s:
                 said = time.monotonic()
                 open_keys = wanted - records.keys()
@@ -170,6 +172,12 @@ class WorkerDispatcher:
                     states.count(TrialState.RUNNING),
                 )
             time.sleep(POLL_S)
+
+
+def _judge_stale(patience: Patience, study: optuna.Study, heartbeat_s: int) -> None:
+    """Fail stale trials and queue their copies, also copies a dead judge never queued."""
+    patience.stale_check(study)
+    patience(lambda: queue_lost_copies(study, settled_s=3 * heartbeat_s))
 
 
 # -- working ---------------------------------------------------------------------------------
@@ -360,7 +368,7 @@ class _Worker:
             with storage_errors(self.url):
                 idle_since = time.monotonic()
                 while self._stop is None:
-                    self.patience.stale_check(self.study)
+                    _judge_stale(self.patience, self.study, self.heartbeat_s)
                     trial_id = self._claim()
                     if trial_id is not None:
                         self._run(trial_id)
@@ -443,8 +451,15 @@ class _Worker:
 
         try:
             record = self.patience(tell)
-        except optuna.exceptions.UpdateFinishedTrialError:
-            self._judged_stale(trial)
+        except (optuna.exceptions.UpdateFinishedTrialError, ValueError):
+            # finished meanwhile: failed as stale, or by this tell whose answer was lost
+            frozen = self.patience(partial(self.storage.get_trial, trial_id))
+            if frozen.state == TrialState.RUNNING:
+                raise
+            if frozen.state == TrialState.COMPLETE or "reason" in frozen.user_attrs:
+                self._count(trial.number, record_of(frozen))
+            else:
+                self._judged_stale(trial)
             return
         self._count(trial.number, record)
 

@@ -1,4 +1,4 @@
-"""The journal file's write lock: a kernel lock that dies with its holder, then Optuna's.
+"""The journal file's write lock: Optuna's symlink lock, whose dead holder is recognised.
 
 Optuna guards a journal with :class:`~optuna.storages.journal.JournalFileSymlinkLock`,
 a symlink ``<journal>.lock`` that a writer creates and removes around each append. A
@@ -6,17 +6,20 @@ writer killed inside (SIGKILL, the OOM killer) leaves the symlink behind, and ev
 other writer then waits out its grace period (30 s) without writing — heartbeats
 included, so a live trial went stale and was failed and queued again.
 
-:class:`JournalLock` takes ``flock`` on ``<journal>.flock`` first. The kernel drops
-that lock when its holder dies, and a writer holding it knows that no writer of ours
-holds the symlink. Then it takes the symlink, which the Optuna CLI and
-``optuna-dashboard`` take on their own, so the journal is still theirs to write.
-A symlink that stays put while the journal does not change for
-:data:`DEAD_HOLDER_S` is therefore a dead writer's (a live Optuna writer holds it for
-one append) and is removed the way Optuna releases it.
+:class:`JournalLock` takes ``flock`` on ``<journal>.flock`` first; the kernel drops
+it when its holder dies. Holding it, a writer creates the symlink — which the Optuna
+CLI and ``optuna-dashboard`` take on their own, so the journal stays theirs to write —
+and writes into ``<journal>.flock`` who holds it: the machine, the process id and the
+symlink's inode (cleared again before the symlink is removed). A writer that finds
+the symlink there, and the record naming that very symlink and a process of this
+machine that is no longer alive, removes it at once (as Optuna removes a lock). Any
+other symlink — another machine's, an Optuna writer's, one whose holder may be alive —
+keeps Optuna's grace period: nothing is judged dead by time alone.
 
-Where the kernel lock cannot be had — a file system without ``flock`` (some NFS
-mounts), or a holder alive but frozen (SIGSTOP) for Optuna's grace period — the
-writer falls back to the symlink lock alone, Optuna's own behaviour.
+Where the kernel lock cannot be had — a file system without ``flock``, a ``.flock``
+file this user cannot open, or a holder alive but frozen (SIGSTOP) for Optuna's grace
+period — the writer takes the symlink lock alone, Optuna's own behaviour; after a
+holder froze, later appends try the kernel lock once and do not wait for it again.
 """
 
 from __future__ import annotations
@@ -24,25 +27,22 @@ from __future__ import annotations
 import errno
 import fcntl
 import os
+import socket
 import time
 import weakref
 from collections.abc import Iterator
 
 from optuna.storages.journal import JournalFileSymlinkLock
 
-__all__ = ["DEAD_HOLDER_S", "JournalLock"]
-
-DEAD_HOLDER_S = 1.0
-"""How long [s] a symlink may stay with the journal unchanged while the kernel lock is
-held before it is taken for a dead writer's. Below a heartbeat's grace (3 s at the
-shortest), so a dead writer's lock no longer makes a live trial stale."""
+__all__ = ["GRACE_S", "JournalLock"]
 
 GRACE_S = 30
-"""Optuna's grace period [s]: the symlink lock alone breaks a lock unchanged this long."""
+"""Optuna's grace period [s]: a symlink with the journal unchanged this long is broken."""
 
 _POLL_S = (0.001, 0.05)  # first and longest sleep between tries
+_RECORD_BYTES = 256
 
-_HELD: weakref.WeakSet[JournalLock] = weakref.WeakSet()  # locks whose kernel lock is held
+_OPEN: weakref.WeakSet[JournalLock] = weakref.WeakSet()  # locks with a kernel-lock descriptor
 
 
 def _let_go_of_inherited_locks() -> None:
@@ -52,14 +52,33 @@ def _let_go_of_inherited_locks() -> None:
     holds it; a child outliving a killed parent would otherwise keep the lock. Closing
     the child's copy leaves the parent's lock as it is.
     """
-    for lock in list(_HELD):
+    for lock in list(_OPEN):
         if lock._fd is not None:
             os.close(lock._fd)
             lock._fd = None
-    _HELD.clear()
+    _OPEN.clear()
 
 
 os.register_at_fork(after_in_child=_let_go_of_inherited_locks)
+
+
+def _this_machine() -> str:
+    """The host and its PID namespace: where a process id means one process."""
+    try:
+        namespace = os.stat("/proc/self/ns/pid").st_ino
+    except OSError:
+        namespace = 0
+    return f"{socket.gethostname()}/{namespace}"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # another user's process
+    return True
 
 
 class JournalLock(JournalFileSymlinkLock):
@@ -70,22 +89,18 @@ class JournalLock(JournalFileSymlinkLock):
     ----------
     journal : str
         The journal file's path.
-    dead_holder_s : float
-        See :data:`DEAD_HOLDER_S`.
     grace_s : int
-        Optuna's grace period, for the symlink lock alone (see the module docstring).
+        Optuna's grace period (module docstring).
     """
 
-    def __init__(
-        self, journal: str, *, dead_holder_s: float = DEAD_HOLDER_S, grace_s: int = GRACE_S
-    ) -> None:
+    def __init__(self, journal: str, *, grace_s: int = GRACE_S) -> None:
         super().__init__(journal, grace_period=grace_s)
         self._journal = journal
         self._link = self._lock_file  # Optuna's name for it: <journal>.lock
         self._kernel_file = journal + ".flock"
-        self._dead_holder_s = dead_holder_s
         self._grace_s = grace_s
         self._fd: int | None = None
+        self._kernel_lock_stuck = False  # its last holder did not let go within the grace
 
     def acquire(self) -> bool:
         try:
@@ -99,6 +114,8 @@ class JournalLock(JournalFileSymlinkLock):
 
     def release(self) -> None:
         try:
+            if self._fd is not None:
+                os.ftruncate(self._fd, 0)  # a record names only a symlink still held
             super().release()
         finally:
             self._kernel_unlock()
@@ -106,47 +123,55 @@ class JournalLock(JournalFileSymlinkLock):
     def _kernel_lock(self) -> bool:
         """Take the kernel lock; False where it cannot be had (module docstring)."""
         try:
-            fd = os.open(self._kernel_file, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+            self._fd = os.open(self._kernel_file, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
         except OSError:
             return False  # e.g. a read-only folder: the symlink lock says what is wrong
-        deadline = time.monotonic() + self._grace_s
+        _OPEN.add(self)
+        deadline = time.monotonic() + (0.0 if self._kernel_lock_stuck else self._grace_s)
         for sleep_s in _backoff():
             try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                self._fd = fd
-                _HELD.add(self)
+                fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                self._kernel_lock_stuck = False
                 return True
             except OSError as error:
                 if error.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
                     break  # ENOLCK, EOPNOTSUPP: no flock on this file system
-                if time.monotonic() > deadline:
-                    break  # its holder lives but does not finish: Optuna's rule
+                if time.monotonic() >= deadline:
+                    self._kernel_lock_stuck = True  # its holder lives and does not finish
+                    break
             time.sleep(sleep_s)
-        os.close(fd)
+        self._kernel_unlock(held=False)
         return False
 
-    def _kernel_unlock(self) -> None:
+    def _kernel_unlock(self, *, held: bool = True) -> None:
         if self._fd is not None:
             fd, self._fd = self._fd, None
-            _HELD.discard(self)
+            _OPEN.discard(self)
             try:
-                fcntl.flock(fd, fcntl.LOCK_UN)
+                if held:
+                    fcntl.flock(fd, fcntl.LOCK_UN)
             finally:
                 os.close(fd)
 
     def _take_symlink(self) -> None:
-        """Create the symlink, removing one that stays as a dead writer's would."""
+        """Create the symlink and record its holder; remove a dead holder's at once and
+        any other after Optuna's grace (the journal unchanged that long)."""
+        assert self._fd is not None
         seen, since = None, time.monotonic()
         for sleep_s in _backoff():
             try:
                 os.symlink(self._journal, self._link)
-                return
             except FileExistsError:
                 pass
+            else:
+                record = f"{_this_machine()} {os.getpid()} {os.lstat(self._link).st_ino}\n"
+                os.ftruncate(self._fd, 0)
+                os.pwrite(self._fd, record.encode(), 0)
+                return
             holder = _holder_state(self._link, self._journal)
             if holder != seen:  # another holder, or the journal written since
                 seen, since = holder, time.monotonic()
-            elif time.monotonic() - since > self._dead_holder_s:
+            if self._holder_is_dead() or time.monotonic() - since > self._grace_s:
                 try:
                     super().release()  # rename, then unlink: Optuna's own removal
                 except RuntimeError:
@@ -154,6 +179,19 @@ class JournalLock(JournalFileSymlinkLock):
                 seen, since = None, time.monotonic()
                 continue
             time.sleep(sleep_s)
+
+    def _holder_is_dead(self) -> bool:
+        """The record names this symlink and a process of this machine that is gone."""
+        assert self._fd is not None
+        try:
+            machine, pid, inode = os.pread(self._fd, _RECORD_BYTES, 0).decode().split()
+            return (
+                machine == _this_machine()
+                and int(inode) == os.lstat(self._link).st_ino
+                and not _alive(int(pid))
+            )
+        except (OSError, ValueError):
+            return False  # no record, or the symlink has just gone
 
 
 def _holder_state(link: str, journal: str) -> tuple[int, int] | None:

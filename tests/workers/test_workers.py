@@ -23,6 +23,7 @@ from surrogate.identify._verify import enqueue, open_verify_study
 from surrogate.identify._worker import work
 from surrogate.storage._storage import MAX_RETRY, open_storage
 from surrogate.study._spec import load_study
+from tests.test_journal_lock import die_inside_the_lock
 from tests.workers.fixed_cost import FixedCostSolve, events
 
 REPO = Path(__file__).resolve().parents[2]
@@ -137,7 +138,7 @@ def test_a_writer_killed_inside_the_journal_lock_makes_no_live_trial_stale(study
     log = tmp_path / "solver.log"
     workers = [_worker(study_file, storage_url, log, 2.0) for _ in range(2)]  # 1 s heartbeat
     _wait_for(lambda: len([e for e, _, _ in events(log) if e == "start"]) >= 2)
-    os.symlink(journal, f"{journal}.lock")  # as a writer SIGKILLed while appending leaves it
+    die_inside_the_lock(str(journal))  # a writer SIGKILLed while it appends
     _wait_all(workers)
     trials = _trials(study_file, storage_url)
     assert [t.state for t in trials] == [TrialState.COMPLETE] * len(keys)
@@ -176,6 +177,36 @@ def test_a_worker_whose_live_trial_is_judged_stale_goes_on_and_repeats_no_run(st
     assert sorted(t.user_attrs["input_hash"] for t in complete) == sorted(keys)
     starts = collections.Counter(k for e, k, _ in events(log) if e == "start")
     assert starts == dict.fromkeys(keys, 1)
+    assert result.runs == len(keys)
+
+
+def test_a_trial_failed_as_stale_whose_copy_was_never_queued_gets_one(study_file, tmp_path):
+    """``fail_stale_trials`` fails a stale trial, then queues its copy: a judge killed or cut
+    off from the storage in between left a FAIL trial whose copy the planner awaited for
+    ever. Once the FAIL is older than the grace, the next worker queues the copy."""
+    storage_url = f"journal://{tmp_path / 'study.log'}"
+    keys = _plan(study_file, storage_url, 3)
+    spec = load_study(study_file)
+    storage = open_storage(storage_url, heartbeat_s=1)
+    study = optuna.load_study(study_name=f"{spec.name}/verify", storage=storage)
+    judged = study.get_trials(deepcopy=False, states=(TrialState.WAITING,))[0]
+    assert storage.set_trial_state_values(judged._trial_id, state=TrialState.RUNNING)
+    assert storage.set_trial_state_values(judged._trial_id, state=TrialState.FAIL)
+    time.sleep(3.5)  # past the grace: three heartbeat intervals
+    log = tmp_path / "solver.log"
+    result = work(
+        study_file,
+        storage=storage_url,
+        heartbeat_s=1,
+        idle_timeout_s=0.0,
+        solve=FixedCostSolve(log, 0.0),
+        progress=False,
+    )
+    trials = _trials(study_file, storage_url)
+    complete = [t for t in trials if t.state == TrialState.COMPLETE]
+    assert sorted(t.user_attrs["input_hash"] for t in complete) == sorted(keys)
+    (copy,) = [t for t in complete if judged.number in t.system_attrs.get("retry_history", [])]
+    assert copy.user_attrs["input_hash"] == judged.user_attrs["input_hash"]
     assert result.runs == len(keys)
 
 
