@@ -98,34 +98,25 @@ def _hold(lock, seconds, released):
     lock.release()
 
 
-@pytest.mark.parametrize("holder", ["ours", "optuna"])
-def test_a_live_holder_keeps_the_lock_until_it_releases_it(journal, holder):
+@pytest.mark.parametrize(
+    ("first", "second"),
+    [
+        (JournalLock, JournalLock),
+        (JournalFileSymlinkLock, JournalLock),  # the Optuna CLI's or dashboard's lock
+        (JournalLock, JournalFileSymlinkLock),
+    ],
+)
+def test_a_live_holder_keeps_the_lock_until_it_releases_it(journal, first, second):
     """Held 1.5 s without writing, longer than any wait of ours but Optuna's grace."""
-    first = JournalLock(journal) if holder == "ours" else JournalFileSymlinkLock(journal)
-    held_s = 1.5
     released: list[float] = []
-    thread = threading.Thread(target=_hold, args=(first, held_s, released))
+    thread = threading.Thread(target=_hold, args=(first(journal), 1.5, released))
     thread.start()
     while not os.path.lexists(journal + ".lock"):
         time.sleep(0.001)
-    second = JournalLock(journal)
-    second.acquire()
+    waiting = second(journal)
+    waiting.acquire()
     acquired = time.monotonic()
-    second.release()
-    thread.join()
-    assert released and acquired >= released[0]
-
-
-def test_optunas_own_writers_wait_for_ours(journal):
-    released: list[float] = []
-    thread = threading.Thread(target=_hold, args=(JournalLock(journal), 0.3, released))
-    thread.start()
-    while not os.path.lexists(journal + ".lock"):
-        time.sleep(0.001)
-    theirs = JournalFileSymlinkLock(journal)
-    theirs.acquire()
-    acquired = time.monotonic()
-    theirs.release()
+    waiting.release()
     thread.join()
     assert released and acquired >= released[0]
 

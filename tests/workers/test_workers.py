@@ -79,6 +79,28 @@ def _wait_for(condition, timeout=60, every=0.05):
     raise AssertionError("timed out")
 
 
+def _claim_one(study_file, storage_url):
+    """The storage (1 s heartbeat) and the first queued trial, claimed as a worker would."""
+    spec = load_study(study_file)
+    storage = open_storage(storage_url, heartbeat_s=1)
+    study = optuna.load_study(study_name=f"{spec.name}/verify", storage=storage)
+    trial = study.get_trials(deepcopy=False, states=(TrialState.WAITING,))[0]
+    assert storage.set_trial_state_values(trial._trial_id, state=TrialState.RUNNING)
+    return storage, trial
+
+
+def _work_here(study, storage_url, log, idle_timeout_s=0.0):
+    """A worker in this process (1 s heartbeat) until nothing is queued or running."""
+    return work(
+        study,
+        storage=storage_url,
+        heartbeat_s=1,
+        idle_timeout_s=idle_timeout_s,
+        solve=FixedCostSolve(log, 0.0),
+        progress=False,
+    )
+
+
 def test_four_workers_finish_a_40_run_plan_each_run_exactly_once(study_file, storage_url, tmp_path):
     keys = _plan(study_file, storage_url, 40)
     assert len(set(keys)) == 40
@@ -186,22 +208,11 @@ def test_a_trial_failed_as_stale_whose_copy_was_never_queued_gets_one(study_file
     ever. Once the FAIL is older than the grace, the next worker queues the copy."""
     storage_url = f"journal://{tmp_path / 'study.log'}"
     keys = _plan(study_file, storage_url, 3)
-    spec = load_study(study_file)
-    storage = open_storage(storage_url, heartbeat_s=1)
-    study = optuna.load_study(study_name=f"{spec.name}/verify", storage=storage)
-    judged = study.get_trials(deepcopy=False, states=(TrialState.WAITING,))[0]
-    assert storage.set_trial_state_values(judged._trial_id, state=TrialState.RUNNING)
+    storage, judged = _claim_one(study_file, storage_url)
     assert storage.set_trial_state_values(judged._trial_id, state=TrialState.FAIL)
     time.sleep(3.5)  # past the grace: three heartbeat intervals
     log = tmp_path / "solver.log"
-    result = work(
-        study_file,
-        storage=storage_url,
-        heartbeat_s=1,
-        idle_timeout_s=0.0,
-        solve=FixedCostSolve(log, 0.0),
-        progress=False,
-    )
+    result = _work_here(study_file, storage_url, log)
     trials = _trials(study_file, storage_url)
     complete = [t for t in trials if t.state == TrialState.COMPLETE]
     assert sorted(t.user_attrs["input_hash"] for t in complete) == sorted(keys)
@@ -257,22 +268,11 @@ def test_a_trial_claimed_without_a_first_heartbeat_is_failed_and_redone(
     """The window between a claim and its first heartbeat (two transactions), made
     deterministic: a worker 'dies' right after moving a trial to RUNNING."""
     keys = _plan(study_file, storage_url, 2)
-    spec = load_study(study_file)
-    storage = open_storage(storage_url, heartbeat_s=1)
-    study = optuna.load_study(study_name=f"{spec.name}/verify", storage=storage)
-    claimed = study.get_trials(deepcopy=False, states=(TrialState.WAITING,))[0]
-    assert storage.set_trial_state_values(claimed._trial_id, state=TrialState.RUNNING)
+    _, claimed = _claim_one(study_file, storage_url)
     time.sleep(3.5)  # past the grace period: three heartbeat intervals
 
     log = tmp_path / "solver.log"
-    result = work(
-        study_file,
-        storage=storage_url,
-        heartbeat_s=1,
-        idle_timeout_s=0.0,
-        solve=FixedCostSolve(log, 0.0),
-        progress=False,
-    )
+    result = _work_here(study_file, storage_url, log)
 
     trials = _trials(study_file, storage_url)
     assert not [t for t in trials if t.state in (TrialState.RUNNING, TrialState.WAITING)]
@@ -299,16 +299,7 @@ def test_the_idle_timeout_counts_from_when_nothing_is_queued_or_running(study_fi
     log = tmp_path / "solver.log"
     results = []
     worker = threading.Thread(
-        target=lambda: results.append(
-            work(
-                spec,
-                storage=storage_url,
-                heartbeat_s=1,
-                idle_timeout_s=3.0,
-                solve=FixedCostSolve(log, 0.0),
-                progress=False,
-            )
-        )
+        target=lambda: results.append(_work_here(spec, storage_url, log, idle_timeout_s=3.0))
     )
     worker.start()
     for _ in range(10):  # the other run takes 5 s (its worker keeps the heartbeat)
