@@ -43,6 +43,7 @@ from ..storage._storage import (
     MAX_RETRY,
     STORAGE_PATIENCE_S,
     Patience,
+    check_storage_patience,
     check_workers,
     open_storage,
     storage_errors,
@@ -227,7 +228,7 @@ def work(
     check_workers(storage, jobs)
     if not isinstance(idle_timeout_s, int | float) or not idle_timeout_s >= 0:
         raise InputDataError(f"--idle-timeout must be ≥ 0 s, got {idle_timeout_s!r}")
-    Patience(storage, storage_patience_s, grace_s=0)  # checks it
+    check_storage_patience(storage_patience_s)
     quiet_optuna()
     if progress:
         show_progress()
@@ -373,9 +374,7 @@ class _Worker:
                     if trial_id is not None:
                         self._run(trial_id)
                         idle_since = time.monotonic()
-                    elif self.patience(
-                        self._running
-                    ):  # idle only once nothing is queued or running
+                    elif self.patience(self._running):  # idle once nothing is queued or running
                         idle_since = time.monotonic()
                         time.sleep(POLL_S)
                     elif time.monotonic() - idle_since < idle_timeout_s:

@@ -53,6 +53,7 @@ __all__ = [
     "STORAGE_PATIENCE_S",
     "Patience",
     "StorageError",
+    "check_storage_patience",
     "check_storage_url",
     "check_workers",
     "in_memory_storage",
@@ -487,6 +488,15 @@ def unreachable(error: BaseException) -> bool:
     return False
 
 
+def check_storage_patience(patience_s: Any) -> float:
+    """``--storage-patience`` as a float, or a one-line error."""
+    if isinstance(patience_s, bool) or not isinstance(patience_s, int | float):
+        raise InputDataError(f"--storage-patience must be a number of seconds, got {patience_s!r}")
+    if not patience_s >= 0:
+        raise InputDataError(f"--storage-patience must be ≥ 0 s, got {patience_s!r}")
+    return float(patience_s)
+
+
 class Patience:
     """Rides out a storage that cannot be reached for up to ``patience_s``.
 
@@ -512,14 +522,8 @@ class Patience:
         grace_s: float,
         stopping: Callable[[], bool] = lambda: False,
     ) -> None:
-        if isinstance(patience_s, bool) or not isinstance(patience_s, int | float):
-            raise InputDataError(
-                f"--storage-patience must be a number of seconds, got {patience_s!r}"
-            )
-        if not patience_s >= 0:
-            raise InputDataError(f"--storage-patience must be ≥ 0 s, got {patience_s!r}")
         self.url = url
-        self.patience_s = float(patience_s)
+        self.patience_s = check_storage_patience(patience_s)
         self.grace_s = grace_s
         self.stopping = stopping
         self._last_failure = -float("inf")
