@@ -193,13 +193,16 @@ def run_calibration(
     record: bool = True,
     correction: CurveCorrection | None = None,
     expensive: bool = True,
+    certify: bool = True,
 ) -> tuple[CalibrationResult, CalibrationLoop]:
     """:func:`calibrate`, and the loop it ran (the diagnosis reads its correction).
 
     With an external full solver: ``correction`` starts the corrected built-in model
     from earlier expensive runs; without ``expensive`` only that model is calibrated
     (built-in runs, nothing verified by the expensive solver: the diagnosis's
-    recalibrations of candidates, never recorded).
+    recalibrations of candidates, never recorded); without ``certify`` a local optimum
+    the corrected model's first-order test passed is not tested again by the expensive
+    solver (the diagnosis's calibrations, whose runs name the effect).
     """
     check_jobs(jobs)
     check_budget(max_solver_calls)  # bad options fail before anything is read or written
@@ -228,6 +231,7 @@ def run_calibration(
             progress=progress,
             label=name,
             correction=correction,
+            certify=certify,
         )
     else:
         runs = CorrectedRuns(problem, cache, jobs=jobs, correction=correction)
@@ -341,7 +345,7 @@ def _multi_fidelity(loop: CalibrationLoop, best: VerifiedPoint) -> dict[str, Any
         if loop.single_fidelity
         else f"{kind}'s own local phase went on from the best verified point"
     )
-    return fidelity_record(
+    record = fidelity_record(
         kind,
         loop.low_fidelity_runs,
         loop.correction_at(best),
@@ -349,6 +353,26 @@ def _multi_fidelity(loop: CalibrationLoop, best: VerifiedPoint) -> dict[str, Any
         loop.dropped_after,
         then,
     )
+    fit = loop.best_fit()
+    tested_by = None
+    if fit is not None and loop.converged_at_best():
+        tested_by = "corrected model" if loop.by_corrected_model(fit) else kind
+    record["optimum_tested_by"] = tested_by
+    if tested_by == "corrected model":
+        jacobian = len(loop.problem.space) * loop.problem.runs_per_point
+        record["sentence"] += (
+            f". The first-order test that held is the corrected model's, so the intervals "
+            f"are its own and may miss {kind}'s optimum: {kind}'s own test ({jacobian} runs) "
+            + (
+                "is left to `surrogate calibrate` (a diagnosis spends its runs on naming "
+                "the effect)"
+                if not loop.certify
+                else f"did not fit in the budget ({loop.short}): raise --budget to certify it"
+                if loop.short
+                else "did not finish (the progress log says why)"
+            )
+        )
+    return record
 
 
 def unconverged_reason(result: CalibrationResult, fit: LocalFit | None) -> str | None:

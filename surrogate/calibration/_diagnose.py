@@ -175,7 +175,7 @@ def diagnose(
     # built-in solver's (milliseconds) stay in this process
     expensive_jobs = cpu_jobs(jobs) if spec.low_fidelity else 1
     fitted, loop = run_calibration(
-        spec, effects=chosen, storage=url, jobs=expensive_jobs, progress=progress
+        spec, effects=chosen, storage=url, jobs=expensive_jobs, progress=progress, certify=False
     )
     problem = CalibrationProblem(spec, data, chosen)
     say = _Say(progress, f"{spec.name}/diagnose")
@@ -562,6 +562,7 @@ class _Refits:
             progress=self.say.on,  # 30 expensive runs: labelled by the model confirmed
             record=False,
             correction=CurveCorrection(self.correction.Z, self.correction.D),
+            certify=False,
         )
         self.expensive_calls += found.solver_calls
         if found.multi_fidelity is not None:
