@@ -20,6 +20,7 @@ patience, while the solve goes on (:class:`surrogate.storage._storage.Patience`)
 from __future__ import annotations
 
 import logging
+import math
 import signal
 import threading
 import time
@@ -150,11 +151,12 @@ class WorkerDispatcher:
     def _wait(self, study: optuna.Study, keys: list[str], phase: str) -> dict[str, Verification]:
         """Until every run of ``keys`` is over; says what it waits for every heartbeat."""
         wanted, said = set(keys), time.monotonic()
+        judge = _StaleJudge(self.patience, self.heartbeat_s)
         while True:
             records = self.patience(lambda: finished_records(study, wanted))
             if len(records) == len(wanted):
                 return records
-            _judge_stale(self.patience, study, self.heartbeat_s)
+            judge(study)
             if self.progress and time.monotonic() - said >= self.heartbeat_s:
                 said = time.monotonic()
                 open_keys = wanted - records.keys()
@@ -175,10 +177,24 @@ class WorkerDispatcher:
             time.sleep(POLL_S)
 
 
-def _judge_stale(patience: Patience, study: optuna.Study, heartbeat_s: int) -> None:
-    """Fail stale trials and queue their copies, also copies a dead judge never queued."""
-    patience.stale_check(study)
-    patience(lambda: queue_lost_copies(study, settled_s=3 * heartbeat_s))
+class _StaleJudge:
+    """Fail stale trials and queue their copies, also copies a dead judge never queued.
+
+    Optuna's check reads the running trials only, at every call; :func:`queue_lost_copies`
+    reads every trial with its attributes — on PostgreSQL, with thousands of trials and
+    many workers polling every ``POLL_S``, a query load for nothing — so it runs once a
+    heartbeat interval: it acts only on failures older than three.
+    """
+
+    def __init__(self, patience: Patience, heartbeat_s: int) -> None:
+        self.patience, self.heartbeat_s = patience, heartbeat_s
+        self._scanned = -math.inf
+
+    def __call__(self, study: optuna.Study) -> None:
+        self.patience.stale_check(study)
+        if time.monotonic() - self._scanned >= self.heartbeat_s:
+            self.patience(lambda: queue_lost_copies(study, settled_s=3 * self.heartbeat_s))
+            self._scanned = time.monotonic()
 
 
 # -- working ---------------------------------------------------------------------------------
@@ -368,8 +384,9 @@ class _Worker:
         try:
             with storage_errors(self.url):
                 idle_since = time.monotonic()
+                judge = _StaleJudge(self.patience, self.heartbeat_s)
                 while self._stop is None:
-                    _judge_stale(self.patience, self.study, self.heartbeat_s)
+                    judge(self.study)
                     trial_id = self._claim()
                     if trial_id is not None:
                         self._run(trial_id)

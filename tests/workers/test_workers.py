@@ -8,6 +8,7 @@ file and on a throwaway PostgreSQL server.
 from __future__ import annotations
 
 import collections
+import itertools
 import os
 import signal
 import subprocess
@@ -219,6 +220,30 @@ def test_a_trial_failed_as_stale_whose_copy_was_never_queued_gets_one(study_file
     (copy,) = [t for t in complete if judged.number in t.system_attrs.get("retry_history", [])]
     assert copy.user_attrs["input_hash"] == judged.user_attrs["input_hash"]
     assert result.runs == len(keys)
+
+
+def test_a_worker_scans_for_lost_copies_once_a_heartbeat_interval(
+    study_file, tmp_path, monkeypatch
+):
+    """The scan for lost copies reads every trial with its attributes: once a heartbeat
+    interval, not at every poll (``POLL_S``, 0.5 s while idle: twice as often with the
+    1 s heartbeat here) — it acts only on failures older than three intervals."""
+    from surrogate.identify import _worker
+
+    scans = []
+    scan = _worker.queue_lost_copies
+    monkeypatch.setattr(
+        _worker,
+        "queue_lost_copies",
+        lambda *a, **k: (scans.append(time.monotonic()), scan(*a, **k)),
+    )
+    storage_url = f"journal://{tmp_path / 'study.log'}"
+    _plan(study_file, storage_url, 1)
+    start = time.monotonic()
+    _work_here(study_file, storage_url, tmp_path / "solver.log", idle_timeout_s=3.0)
+    elapsed = time.monotonic() - start
+    assert elapsed >= 3.0 and 3 <= len(scans) <= elapsed / 1.0 + 1, (elapsed, scans)
+    assert min(b - a for a, b in itertools.pairwise(scans)) >= 1.0
 
 
 def test_sigterm_fails_the_trial_and_another_worker_redoes_it(study_file, storage_url, tmp_path):
