@@ -753,11 +753,12 @@ def test_a_stalled_trust_region_teaches_the_correction_the_expensive_tests_runs(
     assert found.status == "converged" and found.misfit == "systematic", found.message
 
     # the expensive local phase instead: more runs to its optimum with OpenBLAS's Haswell
-    # kernels; with its Sandybridge ones the whole budget (where this rule converged on its
-    # last run) short of one; no better a point either way
+    # kernels; with its Sandybridge ones (and, since a Jacobian the budget cannot hold is
+    # not started, with its SkylakeX ones) the budget short of one; no better a point
+    # either way
     before_rule, _ = calibrate("local", lambda self: False)
-    assert found.solver_calls < before_rule.solver_calls or (
-        found.solver_calls == before_rule.solver_calls and before_rule.status == "budget_exhausted"
+    assert (
+        found.solver_calls < before_rule.solver_calls or before_rule.status == "budget_exhausted"
     ), before_rule.message
     assert found.rmse_n <= before_rule.rmse_n * (1.0 + 1e-3)
 

@@ -181,3 +181,25 @@ def test_at_a_corner_a_difference_keeps_its_side_where_the_other_leaves_the_box(
     jac = model.jacobian(model.pin(theta))
     norms = np.linalg.norm(jac, axis=0)  # every column a slope, not rounding (an ulp apart)
     assert np.all(norms > 1e-6 * norms.max()), norms
+
+
+@pytest.mark.parametrize("short", [1, 3])
+def test_a_round_whose_jacobian_the_budget_cannot_hold_spends_none_of_it(tmp_path, short):
+    """The first-order test's Jacobian (p points × G runs) is started only where the budget
+    left holds it: a Jacobian that cannot finish tells nothing (an expensive local phase
+    spent its last 2 CalculiX runs, 3 minutes, on one). With a budget ``short`` runs
+    below the start and its Jacobian, the fit stops at the start with runs unspent; with
+    enough for them, the same test runs."""
+    problem = _problem(tmp_path, 0)
+    start = np.array([TRUTH["ecoat_gpa"] * 1.02, TRUTH["scoat_gpa"], TRUTH["tcoat_mm"]])
+    G = len(TESTS)
+    needed = (1 + start.size) * G  # the start and one point a column, at every group
+    runs = SolverRuns(problem, tmp_path / "short", jobs=1)
+    fit = local_fit(ResidualModel(problem, runs, budget=needed - short), start, near=True)
+    assert runs.calls == G  # the start only: no column of a Jacobian
+    assert not fit.converged and "the first-order test's Jacobian needs" in fit.message
+    assert fit.budget_spent  # the calibration says budget_exhausted, "raise --budget"
+    assert np.array_equal(fit.theta, start)
+    enough = SolverRuns(problem, tmp_path / "enough", jobs=1)
+    local_fit(ResidualModel(problem, enough, budget=needed + G), start, near=True)
+    assert enough.calls > needed - short  # the Jacobian ran

@@ -250,18 +250,45 @@ class ResidualModel:
         residual = self.residual(x)
         jac = np.empty((residual.size, x.size))
         for j in range(x.size):
-            step = self.fd_step if x[j] + self.fd_step <= 1.0 else -self.fd_step
-            shifted = x.copy()
-            shifted[j] += step
-            held = np.array_equal(self.point(shifted), self.point(x))
-            if held or (  # …or near its bound, where the other side lies within the box
-                self.coordinates.crosses_a_bound(x, shifted) and 0.0 <= x[j] - step <= 1.0
-            ):
-                shifted[j] = x[j] - step  # Ecoat or Scoat held at its bound: inwards
-                step = -step
+            shifted, step = self._shifted(x, j)
             shifted_residual, curves = self.evaluate(shifted)
             jac[:, j] = 0.0 if curves is None else (shifted_residual - residual) / step
         return jac
+
+    def _shifted(self, x: np.ndarray, j: int) -> tuple[np.ndarray, float]:
+        """The point of :meth:`jacobian`'s ``j``-th difference, and its step."""
+        step = self.fd_step if x[j] + self.fd_step <= 1.0 else -self.fd_step
+        shifted = x.copy()
+        shifted[j] += step
+        held = np.array_equal(self.point(shifted), self.point(x))
+        if held or (  # …or near its bound, where the other side lies within the box
+            self.coordinates.crosses_a_bound(x, shifted) and 0.0 <= x[j] - step <= 1.0
+        ):
+            shifted[j] = x[j] - step  # Ecoat or Scoat held at its bound: inwards
+            step = -step
+        return shifted, step
+
+    def check_jacobian_fits(self, unit: np.ndarray) -> None:
+        """Raise :class:`BudgetSpent` where the runs :meth:`unit_jacobian` at ``unit`` would
+        add exceed the budget — before any of them: a Jacobian that cannot finish tells
+        nothing (an expensive solver's local phase spent its last 2 CalculiX runs, 3
+        minutes, on the first column of one)."""
+        if self.budget is None:
+            return
+        x = self.coordinates.from_unit(unit)
+        points = [x] + [self._shifted(x, j)[0] for j in range(x.size)]
+        pending = [p for p in points if self._key(p) not in self._memo]
+        if not pending:
+            return
+        runs = [self._at(p) for p in pending]
+        thetas = np.concatenate([t for t, _ in runs])
+        groups = [g for _, gs in runs for g in gs]
+        needed = self.runs.cost(thetas, groups)
+        if self.runs.calls + needed > self.budget:
+            raise BudgetSpent(
+                f"{self.runs.calls} of {self.budget} solver runs used; the first-order "
+                f"test's Jacobian needs {needed} more"
+            )
 
     def unit_jacobian(self, unit: np.ndarray) -> np.ndarray:
         """``∂r/∂u`` in the declared unit coordinates (the first-order test and the statistics
@@ -331,7 +358,8 @@ class LocalFit:
     ``converged`` whether the first-order test held; ``message`` says how;
     ``better`` (:func:`optimum_test` only) where the test did not hold, the point at
     which the solver's RMSE was lower by more than the tolerance (None where the test
-    found none).
+    found none); ``budget_spent`` whether the fit ended because the runs it needed next
+    did not fit within the budget.
     ``least_squares`` stops early by its loose default ``ftol``/``xtol``; the
     first-order test, not those, decides when the fit is done.
     """
@@ -346,6 +374,7 @@ class LocalFit:
     converged: bool
     message: str
     better: np.ndarray | None = None
+    budget_spent: bool = False
 
     @property
     def rmse(self) -> float:
@@ -427,6 +456,7 @@ def local_fit(
                 active = np.zeros(x.size, dtype=int)  # the region's bounds are not the box's
                 reason = f"the best point within ±{radius:.3g} of the start (fit coordinates)"
                 break
+            model.check_jacobian_fits(model.coordinates.to_unit(x))  # the test's Jacobian
             test = _first_order_test(model, x)
             if test.holds:
                 return _result(model, x, active, test)
@@ -445,6 +475,7 @@ def local_fit(
             raise
         x, reason = best, f"budget spent ({spent})"
         active = np.zeros(x.size, dtype=int)
+        return replace(_result(model, x, active, None, reason), budget_spent=True)
     return _result(model, x, active, None, reason)
 
 
@@ -554,6 +585,7 @@ def _result(
     residual, curves = model.evaluate(x)
     unit = model.coordinates.to_unit(x)
     try:
+        model.check_jacobian_fits(unit)  # no runs spent on a part of one
         jac = model.unit_jacobian(unit)
     except BudgetSpent:
         jac = np.full((residual.size, x.size), np.nan)

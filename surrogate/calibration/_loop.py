@@ -308,8 +308,9 @@ class CalibrationLoop:
         return max(0, (limit - self.runs.calls) // self.problem.runs_per_point)
 
     def budget_spent(self) -> bool:
-        """Whether the budget is what stopped the loop: no further verification fits."""
-        return not self.verifications_left()
+        """Whether the budget is what stopped the loop: no further verification fits, or a
+        local fit ended because its next runs (a first-order test's Jacobian) did not."""
+        return not self.verifications_left() or any(f.budget_spent for f in self.fits)
 
     def converged_at_best(self) -> bool:
         """Whether the best verified point is a local optimum the first-order test passed."""
