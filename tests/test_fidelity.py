@@ -597,12 +597,17 @@ def test_the_trust_region_follows_the_verified_over_predicted_decrease():
     that verified more than three quarters at the region's edge doubles it, up to the
     whole range; in between, or short of the edge, it stays. A region shrunk below the
     first-order test's smallest step stalls the loop: the expensive solver's own test is
-    to decide."""
+    to decide; so do two verified proposals in a row that each gained under two units of
+    χ² (0.56 % of the RMSE at 182 points and 3 parameters) — a crawl the data barely
+    resolve."""
+    from types import SimpleNamespace
+
     from surrogate.calibration._fidelity import MIN_RADIUS, CorrectedCalibration
     from surrogate.calibration._loop import VerifiedPoint
 
-    loop = CorrectedCalibration.__new__(CorrectedCalibration)  # the rule alone, no problem
-    loop.progress, loop.label, loop.dropped = False, "rule", None
+    loop = CorrectedCalibration.__new__(CorrectedCalibration)  # the rule alone
+    loop.progress, loop.label, loop.dropped, loop.crawled = False, "rule", None, 0
+    loop.problem = SimpleNamespace(n_points=182, space=range(3))
 
     def after(radius, before, predicted, step, verified):
         """The radius after a proposal from RMSE ``before`` predicted at ``predicted``,
@@ -627,6 +632,20 @@ def test_the_trust_region_follows_the_verified_over_predicted_decrease():
         assert after(0.003, 0.10, 0.06, 0.003, verified) < MIN_RADIUS
         assert loop.stalled is not None and "smallest step" in loop.stalled
     assert after(0.003, 0.10, 0.06, 0.003, 0.07) == pytest.approx(0.003) and not loop.stalled
+    # a crawl: 0.2 % and 0.2 % (ρ = 0.5 each) stall; a 5 % gain or a failure between resets
+    assert after(1.0, 0.1, 0.0996, 0.2, 0.0998) == 1.0 and not loop.stalled
+    assert after(1.0, 0.0998, 0.0994, 0.2, 0.0996) == 1.0
+    assert loop.stalled is not None and "2 verified proposals in a row" in loop.stalled
+    for between in (0.095, None):
+        loop.crawled = 0
+        after(1.0, 0.1, 0.0996, 0.2, 0.0998)
+        after(1.0, 0.1, 0.09, 0.2, between)
+        after(1.0, 0.1, 0.0996, 0.2, 0.0998)
+        assert not loop.stalled, between
+    loop.crawled = 0
+    after(1.0, 0.1, 0.0996, 0.2, 0.0998)
+    after(1.0, 0.0998, 0.0994, 0.2, 0.0989)  # 0.9 % ≥ 0.56 %: resolved, no crawl
+    assert not loop.stalled
     loop.dropped = "too large"  # a dropped correction: no more proposals, nothing to manage
     assert after(0.8, 0.10, 0.06, 0.8, None) == pytest.approx(0.8)
 
