@@ -14,3 +14,8 @@ def inside(value: float, combination: Mapping[str, Any] | None) -> bool | None:
     if combination is None or combination.get("low") is None:
         return None
     return combination["low"] <= value <= combination["high"]
+
+
+def mark(covered: bool | None) -> str:
+    """``y``/``n``/``-`` for a column of whether an interval holds the truth."""
+    return "-" if covered is None else ("y" if covered else "n")

@@ -45,7 +45,7 @@ sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != 
 
 import surrogate  # noqa: E402
 from benchmarks._machine import machine  # noqa: E402
-from benchmarks._truth import inside  # noqa: E402
+from benchmarks._truth import inside, mark  # noqa: E402
 from surrogate import Rig  # noqa: E402
 from surrogate.calibration._problem import coat_section  # noqa: E402
 from surrogate.calibration._synthetic import calibration_sets, write_calibration_study  # noqa: E402
@@ -155,7 +155,7 @@ def main() -> None:
         for future in as_completed(futures):
             r = future.result()
             rows.append(r)
-            cover = f"{_mark(r['d_covered'])},{_mark(r['mp_covered'])}"
+            cover = f"{mark(r['d_covered'])},{mark(r['mp_covered'])}"
             print(
                 f"{r['set']:<26}{r['seed']:>5}{r['rmse_over_truth']:>11.3f}"
                 f"{100 * r['d_error']:>9.2f}{100 * r['mp_error']:>9.2f}{cover:>13}"
@@ -167,10 +167,6 @@ def main() -> None:
     print(json.dumps(result, indent=1))
     if args.out:
         args.out.write_text(json.dumps({"rows": rows, "summary": result}, indent=1))
-
-
-def _mark(value: bool | None) -> str:
-    return "-" if value is None else ("y" if value else "n")
 
 
 if __name__ == "__main__":

@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != ROOT / "benchmarks"]
 
 from benchmarks._machine import machine  # noqa: E402
-from benchmarks._truth import inside  # noqa: E402
+from benchmarks._truth import inside, mark  # noqa: E402
 from surrogate.calibration._calibrate import run_calibration  # noqa: E402
 from surrogate.calibration._problem import coat_section  # noqa: E402
 from surrogate.solvers._base import _REGISTRY  # noqa: E402
@@ -130,7 +130,7 @@ def main() -> None:
         for found in pool.map(calibrate_set, tasks):
             for r in found:
                 rows.append(r)
-                cover = ",".join("-" if c is None else "y" if c else "n" for c in r["covered"])
+                cover = ",".join(map(mark, r["covered"]))
                 print(
                     f"{r['distortion']:<11}{r['coating']:>5}{r['seed']:>5}{r['certify']!s:>8}"
                     f"{r['runs']:>6}{r['rmse_over_truth']:>11.3f}{100 * r['d_error']:>9.2f}"
