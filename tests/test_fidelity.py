@@ -776,8 +776,9 @@ def test_a_stalled_trust_region_teaches_the_correction_the_expensive_tests_runs(
     # not started, with its SkylakeX ones) the budget short of one; no better a point
     # either way
     before_rule, _ = calibrate("local", lambda self: False)
-    assert (
-        found.solver_calls < before_rule.solver_calls or before_rule.status == "budget_exhausted"
+    assert found.solver_calls < before_rule.solver_calls or (
+        before_rule.status == "budget_exhausted"
+        and found.solver_calls <= before_rule.solver_calls + p * G  # its Jacobian at most
     ), before_rule.message
     assert found.rmse_n <= before_rule.rmse_n * (1.0 + 1e-3)
 
@@ -1000,3 +1001,26 @@ def test_a_budget_below_todays_design_is_the_corrected_loops_to_spend(distorted_
     with pytest.raises(surrogate.InputDataError, match="it needs at least 10 solver runs"):
         surrogate.calibrate(path, max_solver_calls=4, progress=False)
     assert _expensive_runs(log_runs) == runs
+
+
+def test_a_diagnosis_recalibration_on_the_expensive_solver_does_not_certify(
+    distorted_solver, log_runs, monkeypatch
+):
+    """Where the diagnosis's correction was dropped, its candidates' recalibrations run
+    on the expensive solver (no correction handed on): like the diagnosis's other
+    calibrations they spend no p × G expensive runs on a certificate."""
+    from surrogate.calibration import _diagnose, _fidelity
+    from surrogate.calibration._problem import load_calibration
+
+    made = []
+    init = _fidelity.CorrectedCalibration.__init__
+
+    def spy(self, *args, **kwargs):
+        made.append(kwargs.get("certify", True))
+        init(self, *args, **kwargs)
+
+    monkeypatch.setattr(_fidelity.CorrectedCalibration, "__init__", spy)
+    path = _calibration_study(log_runs / "cal", BENDING, TRUTHS[0], settings="thick = 0.15")
+    spec, data, _, noise = load_calibration(path, None, ())
+    _diagnose._recalibrate((spec, data, ("hardening",), "hardening", noise, None))
+    assert made == [False]

@@ -708,6 +708,7 @@ def _recalibrate(task: tuple[Any, ...]) -> tuple[_Refit | None, int]:
             record=False,
             correction=None if fix is None else CurveCorrection(*fix),
             expensive=fix is None,
+            certify=False,
         )
         refit = _refit((spec, data, effects, effect, found.params, noise, fix))
         return refit, found.solver_calls

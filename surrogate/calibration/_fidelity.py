@@ -271,14 +271,11 @@ class CorrectedCalibration(CalibrationLoop):
         fit = self.best_fit()
         if fit is None or not self.by_corrected_model(fit) or not self._test_fits():
             return
-        before = len(self.fits)
         self._fall_back(
             "the corrected model's first-order test held at the best verified point: the "
             "expensive solver's own decides",
             near=True,
         )
-        if len(self.fits) > before:  # the expensive local phase ran: its verdict stands
-            self.fits = [f for f in self.fits if not self.by_corrected_model(f)]
         best = self.best()
         if best is not None and best.keys[0] not in self.corrections:  # a point it moved to
             self._measured(best, self._learn(best.theta, best.curves))
@@ -709,7 +706,9 @@ class CorrectedCalibration(CalibrationLoop):
     def _fall_back(self, why: str | None = None, *, near: bool = False) -> None:
         """The expensive solver's own local phase from the best verified point — ``near``
         (the corrected model led there): its first-order test first, each round a fresh
-        Jacobian and a verified Gauss–Newton step (:func:`~._local.local_fit`)."""
+        Jacobian and a verified Gauss–Newton step (:func:`~._local.local_fit`), whose fit
+        replaces the corrected model's tests (a tie at one point took the corrected
+        model's message)."""
         start = self.best()
         if start is None:
             return
@@ -719,7 +718,10 @@ class CorrectedCalibration(CalibrationLoop):
                 f"{why + ': ' if why else ''}the expensive solver's own local phase takes over"
             )
             residuals = ResidualModel(self.problem, self.runs, budget=self.budget)
+            before = len(self.fits)
             self._local(residuals, start, near=near)
+            if len(self.fits) > before:  # it ran: its verdict replaces the corrected model's
+                self.fits = [f for f in self.fits if not self.by_corrected_model(f)]
             return
         # nothing more is run, but the best point keeps a fit saying why (a diagnosis's
         # confirmation reads its residual), in place of its corrected-model test's
