@@ -263,11 +263,12 @@ class CorrectedCalibration(CalibrationLoop):
         point: the expensive solver's own there, where the budget left holds its Jacobian —
         the expensive local phase from that point (:meth:`_fall_back`), whose verdict
         replaces the corrected model's. The corrected model's slopes are learned from a
-        few points: on CalculiX's *mid* curves (seed 1) its test promised ≤ 0.039 % at a
-        point 0.77 % off the truth's Mp, which fits 5.5 % better, and its Mp interval
-        (±0.1 %) missed the truth; on *paper* (seed 4) ±43 % missed it by 52 %. Where the
-        budget does not hold the test, ``converged`` stays the corrected model's and
-        ``short`` says why (the message too)."""
+        few points: on CalculiX's *mid* curves (seed 1) its test promised ≤ 0.049 % at a
+        point 0.77 % off the truth's Mp, which fits 5.5 % better (CalculiX's own test
+        found 1.3 % there), and its Mp interval (±0.1 %) missed the truth; on *paper*
+        (seed 4) ±43 % missed it by 52 %. Where the budget does not hold the test,
+        ``converged`` stays the corrected model's and ``short`` says why (the message
+        too)."""
         fit = self.best_fit()
         if fit is None or not self.by_corrected_model(fit) or not self._test_fits():
             return

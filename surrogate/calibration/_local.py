@@ -272,7 +272,7 @@ class ResidualModel:
         """Raise :class:`BudgetSpent` where the runs :meth:`unit_jacobian` at ``unit`` would
         add exceed the budget — before any of them: a Jacobian that cannot finish tells
         nothing (an expensive solver's local phase spent its last 2 CalculiX runs, 3
-        minutes, on the first column of one)."""
+        minutes, on a part of one)."""
         if self.budget is None:
             return
         x = self.coordinates.from_unit(unit)
