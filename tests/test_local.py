@@ -203,3 +203,21 @@ def test_a_round_whose_jacobian_the_budget_cannot_hold_spends_none_of_it(tmp_pat
     enough = SolverRuns(problem, tmp_path / "enough", jobs=1)
     local_fit(ResidualModel(problem, enough, budget=needed + G), start, near=True)
     assert enough.calls > needed - short  # the Jacobian ran
+
+
+def test_a_test_that_finds_nothing_better_costs_no_second_jacobian(tmp_path, monkeypatch):
+    """Where no fraction of the Gauss–Newton step delivers what it promised, the difference
+    step shrinks for a next round only: the fit's own Jacobian is the test's, whose runs
+    are done. It had been taken again at the smaller step, p × G more runs — 6 CalculiX
+    runs where the expensive solver's test at a stall found nothing better."""
+    problem = _problem(tmp_path, 0)
+    G, p = len(TESTS), 3
+    uphill = np.full(p, 0.04)  # a promise the solver does not keep: away from the truth
+
+    monkeypatch.setattr(_local, "gauss_newton_step", lambda residual, jac, unit: (uphill, 0.5))
+    runs = SolverRuns(problem, tmp_path / "runs", jobs=1)
+    start = np.array([TRUTH["ecoat_gpa"], TRUTH["scoat_gpa"], TRUTH["tcoat_mm"]])
+    fit = _local.optimum_test(ResidualModel(problem, runs, budget=100), start)
+    assert not fit.converged and "the Jacobian is not trusted" in fit.message, fit.message
+    assert runs.calls == G * (1 + p + len(_local.BACKTRACK))  # the point, its columns, the steps
+    assert np.all(np.isfinite(fit.jacobian))

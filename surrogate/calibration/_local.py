@@ -435,9 +435,11 @@ def local_fit(
         low, high = np.maximum(low, centre - radius), np.minimum(high, centre + radius)
     try:
         _check_solved(model, x)
-        round_, stalled = 0, 0
+        round_, stalled, smaller = 0, 0, None
         while stalled < (rounds if radius is None else 1):
             round_ += 1
+            if smaller is not None:  # the last test's smaller step, for this round's
+                model.fd_step, smaller = smaller, None
             x = np.clip(model.coordinates.canonical(x), low, high)
             if not near:
                 found = least_squares(
@@ -460,7 +462,7 @@ def local_fit(
             test = _first_order_test(model, x)
             if test.holds:
                 return _result(model, x, active, test)
-            x, reason = test.better, test.message
+            x, reason, smaller = test.better, test.message, test.fd_step
             stalled += test.verified_gain is None  # a verified gain is progress, not a stall
             active = np.zeros(x.size, dtype=int)  # least_squares's mask was of another point
             if say is not None:
@@ -516,6 +518,7 @@ class _FirstOrderTest:
     verified_gain: float | None  # what the full solver gives at that step (if it was run)
     better: np.ndarray  # the point to go on from when it does not hold
     message: str
+    fd_step: float | None = None  # the smaller difference step for a next round, if any
 
 
 def _first_order_test(model: ResidualModel, x: np.ndarray) -> _FirstOrderTest:
@@ -526,7 +529,8 @@ def _first_order_test(model: ResidualModel, x: np.ndarray) -> _FirstOrderTest:
     Where it promises more, the full solver is asked at the step and at ``BACKTRACK``
     fractions of it: a fraction that delivers more than the tolerance is a better point
     to go on from. Where none delivers, the Jacobian is not trusted and the
-    finite-difference step shrinks tenfold for the next round (down to
+    finite-difference step shrinks tenfold for the next round (``fd_step``: a fit's own
+    Jacobian stays the test's, whose runs are done; down to
     ``MIN_FD_STEP_UNIT``; beyond, the test fails for good: the response is rough) —
     unless the promise is under ``ROUGH_CHI2`` units of χ²: then no point the solver
     was asked about is better by more than the tolerance and what is left is worth
@@ -566,13 +570,13 @@ def _first_order_test(model: ResidualModel, x: np.ndarray) -> _FirstOrderTest:
             f"{model.fd_step:g}: the solver's response is rough at this scale"
         )
         return _FirstOrderTest(False, predicted, None, x, text)
-    model.fd_step = max(model.fd_step / 10.0, MIN_FD_STEP_UNIT)
+    smaller = max(model.fd_step / 10.0, MIN_FD_STEP_UNIT)
     text = (
         f"the Gauss–Newton model promises {100 * predicted:.2g} % lower RMSE but the full solver "
         f"gives none at {tried} of the step: the Jacobian is not trusted (finite-difference "
-        f"step now {model.fd_step:g})"
+        f"step now {smaller:g})"
     )
-    return _FirstOrderTest(False, predicted, None, x, text)
+    return _FirstOrderTest(False, predicted, None, x, text, fd_step=smaller)
 
 
 def _result(
