@@ -359,10 +359,10 @@ def _multi_fidelity(loop: CalibrationLoop, best: VerifiedPoint) -> dict[str, Any
         tested_by = "corrected model" if loop.by_corrected_model(fit) else kind
     record["optimum_tested_by"] = tested_by
     if tested_by == "corrected model":
-        jacobian = len(loop.problem.space) * loop.problem.runs_per_point
         record["sentence"] += (
             f". The first-order test that held is the corrected model's, so the intervals "
-            f"are its own and may miss {kind}'s optimum: {kind}'s own test ({jacobian} runs) "
+            f"are its own and may miss {kind}'s optimum: {kind}'s own test "
+            f"({loop.jacobian_runs} runs) "
             + (
                 "is left to `surrogate calibrate` (a diagnosis spends its runs on naming "
                 "the effect)"

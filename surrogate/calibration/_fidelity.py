@@ -557,13 +557,17 @@ class CorrectedCalibration(CalibrationLoop):
         left = self.verifications_left()
         if left >= needed or self.short is not None:
             return left >= needed
-        G = self.problem.runs_per_point
         self.short = (
-            f"{left * G} expensive run(s) left, short of the {needed * G} of the expensive "
-            "solver's first-order test's Jacobian"
+            f"{left * self.problem.runs_per_point} expensive run(s) left, short of the "
+            f"{self.jacobian_runs} of the expensive solver's first-order test's Jacobian"
         )
         self._say(f"{self.short}: not started")
         return False
+
+    @property
+    def jacobian_runs(self) -> int:
+        """The expensive runs of a first-order test's Jacobian: p points × G groups."""
+        return len(self.problem.space) * self.problem.runs_per_point
 
     def budget_spent(self) -> bool:
         return super().budget_spent() or self.short is not None

@@ -31,7 +31,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import optuna
-from optuna.storages import RetryHeartbeatStaleTrialCallback
 from optuna.trial import FrozenTrial, TrialState
 
 from .._errors import InputDataError
@@ -39,7 +38,7 @@ from ..solvers._base import result_settings
 from ..solvers._batch import solve_inputs, solver_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..storage._optuna import quiet_optuna, suggest
-from ..storage._storage import MAX_RETRY, open_storage, storage_errors
+from ..storage._storage import MAX_RETRY, open_storage, retry_callback, storage_errors
 from ..study._spec import StudySpec, Targets
 from ._objective import constraint_values, is_feasible, meets_target, relative_misfit
 
@@ -264,11 +263,11 @@ def queue_lost_copies(study: optuna.Study, settled_s: float) -> None:
             and trial.datetime_complete is not None
             and (now - trial.datetime_complete).total_seconds() > settled_s
         ):
-            RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)(study, trial)
+            retry_callback()(study, trial)
 
 
 def retry_pending(trial: FrozenTrial) -> bool:
-    """An interrupted trial whose copy was queued again (see RetryHeartbeatStaleTrialCallback)."""
+    """An interrupted trial whose copy was queued again (see :func:`retry_callback`)."""
     return len(trial.system_attrs.get("retry_history", [])) + 1 <= MAX_RETRY
 
 

@@ -31,7 +31,6 @@ from pathlib import Path
 from typing import Any
 
 import optuna
-from optuna.storages import RetryHeartbeatStaleTrialCallback
 from optuna.trial import TrialState
 
 from .._errors import InputDataError
@@ -41,12 +40,12 @@ from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..storage._optuna import quiet_optuna, suggest
 from ..storage._storage import (
-    MAX_RETRY,
     STORAGE_PATIENCE_S,
     Patience,
     check_storage_patience,
     check_workers,
     open_storage,
+    retry_callback,
     storage_errors,
     unreachable,
 )
@@ -513,7 +512,7 @@ class _Worker:
     def _requeue(self, trial: optuna.Trial) -> None:
         """FAIL the interrupted trial after queueing its copy (as a stale trial's)."""
         frozen = self.storage.get_trial(trial._trial_id)
-        RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)(self.study, frozen)
+        retry_callback()(self.study, frozen)
         try:
             self.storage.set_trial_system_attr(trial._trial_id, "interrupted", self._stop)
             self.study.tell(trial, state=TrialState.FAIL)

@@ -62,6 +62,7 @@ __all__ = [
     "open_storage",
     "redacted_url",
     "refuse_in_memory",
+    "retry_callback",
     "storage_error_message",
     "storage_kind",
     "unreachable",
@@ -273,8 +274,7 @@ def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool =
             f"--heartbeat must be a whole number of seconds ≥ 1, got {heartbeat_s!r}"
         )
     grace = None if heartbeat_s is None else 3 * heartbeat_s
-    with _quiet_experimental():
-        retry = RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)
+    retry = retry_callback()
     path = journal_path(url)
     if must_exist:
         local = unstored(url, "a worker")
@@ -299,6 +299,13 @@ def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool =
                 heartbeat_stale_trial_callback=retry if heartbeat_s else None,
                 engine_kwargs=_engine_kwargs(url),
             )
+
+
+def retry_callback() -> RetryHeartbeatStaleTrialCallback:
+    """What queues the copy of a trial failed as stale (or interrupted): a ``WAITING``
+    copy naming it in ``retry_history``, at most ``MAX_RETRY`` times for one run."""
+    with _quiet_experimental():
+        return RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRY)
 
 
 def _engine_kwargs(url: str) -> dict[str, Any]:
