@@ -33,7 +33,7 @@ does deliver, the fit goes on from that better point.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -221,11 +221,7 @@ class ResidualModel:
         key = self._key(x)
         if key not in self._memo:
             thetas, groups = self._at(x)
-            if (
-                self.budget is not None
-                and self.runs.calls + self.runs.cost(thetas, groups) > self.budget
-            ):
-                raise BudgetSpent(f"{self.runs.calls} of {self.budget} solver runs used")
+            self._check_budget(thetas, groups)
             out = self.runs.run(thetas, groups)
             # the point stays the runs it was evaluated with: an x rebuilt from its memo key
             # (``best_evaluated``, rounded) gave parameters an ulp away, whose result-cache
@@ -283,12 +279,17 @@ class ResidualModel:
         runs = [self._at(p) for p in pending]
         thetas = np.concatenate([t for t, _ in runs])
         groups = [g for _, gs in runs for g in gs]
+        self._check_budget(thetas, groups, "the first-order test's Jacobian")
+
+    def _check_budget(self, thetas: np.ndarray, groups: Sequence[int], what: str = "") -> None:
+        """Raise :class:`BudgetSpent` where the runs of ``thetas``/``groups`` not made yet
+        would take the calls past the budget (``what`` needs them, for the message)."""
+        if self.budget is None:
+            return
         needed = self.runs.cost(thetas, groups)
         if self.runs.calls + needed > self.budget:
-            raise BudgetSpent(
-                f"{self.runs.calls} of {self.budget} solver runs used; the first-order "
-                f"test's Jacobian needs {needed} more"
-            )
+            text = f"{self.runs.calls} of {self.budget} solver runs used"
+            raise BudgetSpent(f"{text}; {what} needs {needed} more" if what else text)
 
     def unit_jacobian(self, unit: np.ndarray) -> np.ndarray:
         """``∂r/∂u`` in the declared unit coordinates (the first-order test and the statistics
