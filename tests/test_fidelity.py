@@ -385,6 +385,9 @@ def test_a_corrected_models_optimum_is_converged_on_the_expensive_solvers_own_te
     assert certified.status == "converged", certified.message
     assert certified.multi_fidelity["optimum_tested_by"] == "test-distorted"
     assert "may miss" not in certified.message
+    assert f"test that held is test-distorted's own (a Jacobian of {jacobian}" in (
+        certified.message
+    )
     assert certified.solver_calls >= corrected + jacobian
     assert _expensive_runs(log_runs) - before == certified.solver_calls - corrected  # cached
     assert certified.rmse_n <= uncertified.rmse_n

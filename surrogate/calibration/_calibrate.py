@@ -358,7 +358,12 @@ def _multi_fidelity(loop: CalibrationLoop, best: VerifiedPoint) -> dict[str, Any
     if fit is not None and loop.converged_at_best():
         tested_by = "corrected model" if loop.by_corrected_model(fit) else kind
     record["optimum_tested_by"] = tested_by
-    if tested_by == "corrected model":
+    if tested_by == kind:
+        record["sentence"] += (
+            f". The first-order test that held is {kind}'s own (a Jacobian of "
+            f"{loop.jacobian_runs} {kind} runs), so the intervals are {kind}'s"
+        )
+    elif tested_by == "corrected model":
         record["sentence"] += (
             f". The first-order test that held is the corrected model's, so the intervals "
             f"are its own and may miss {kind}'s optimum: {kind}'s own test "
