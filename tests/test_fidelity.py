@@ -519,6 +519,36 @@ def test_diagnosis_names_a_hidden_effect_confirming_it_on_the_expensive_solver(
 
 
 @pytest.mark.slow
+def test_a_diagnosis_whose_calibration_dropped_the_correction_still_ranks_on_it(
+    distorted_solver, log_runs
+):
+    """Where the current model's calibration dropped the correction (here at once: the
+    expensive curves lie 50 % above the built-in ones, beyond the 25 % it is trusted
+    for), the candidates are still ranked on the corrected built-in model and only the
+    leaders are calibrated on the expensive solver: refitting each candidate with the
+    expensive solver itself took (p + 1)·G runs an iteration (hundreds of CalculiX runs
+    on CalculiX's hidden-tension curves). The verdict, named only on the expensive
+    solver's confirmation, and the record say the correction was dropped."""
+    truth = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
+    hidden = {"tension": {"k_e": 0.006, "k_s": 0.006}}
+    path = _calibration_study(
+        log_runs / "diag", DIAGNOSIS_TESTS, truth, hidden=hidden, seed=3, settings="offset = 0.5"
+    )
+    data_runs = _expensive_runs(log_runs)
+    result = surrogate.diagnose(path, candidates=["tension", "anisotropy"], progress=False)
+    mf = result.multi_fidelity
+    assert mf is not None and mf["dropped"] is not None and "25 %" in mf["dropped"]
+    assert mf["dropped_after"] >= 1
+    leader = result.ranking[0]
+    assert leader["effect"] == "tension" and leader["confirmed_by"] == "test-distorted"
+    assert mf["confirmed"] == ["tension"]
+    assert result.verdict.startswith("missing effect: tension")
+    assert "which the current model's calibration dropped after" in result.verdict
+    assert result.ranking[1]["confirmed_by"] is None  # ranked on the corrected model only
+    assert result.solver_calls == _expensive_runs(log_runs) - data_runs <= 60
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("settings", "hidden", "settled"),
     [
