@@ -1039,9 +1039,11 @@ def test_a_budget_below_todays_design_is_the_corrected_loops_to_spend(distorted_
 def test_a_diagnosis_recalibration_on_the_expensive_solver_does_not_certify(
     distorted_solver, log_runs, monkeypatch
 ):
-    """Where the diagnosis's correction was dropped, its candidates' recalibrations run
-    on the expensive solver (no correction handed on): like the diagnosis's other
-    calibrations they spend no p × G expensive runs on a certificate."""
+    """A diagnosis's recalibration handed no correction runs on the full solver; on an
+    external solver's multi-fidelity study it spends, like the diagnosis's other
+    calibrations, no p × G expensive runs on a certificate. (Since 77373df ``diagnose``
+    hands the correction on even where the calibration dropped it, so this guards
+    ``_recalibrate``'s own contract, not a path ``diagnose`` takes today.)"""
     from surrogate.calibration import _diagnose, _fidelity
     from surrogate.calibration._problem import load_calibration
 
