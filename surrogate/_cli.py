@@ -395,6 +395,7 @@ def _add_run(commands: _Subparsers) -> argparse.ArgumentParser:
         help="N local worker processes verify through the storage (journal or PostgreSQL); "
         "0: queue the runs for `surrogate worker` processes elsewhere (default 1)",
     )
+    _add_storage_patience(running, "the planner (--jobs N != 1)")
     _add_json(running)
     return running
 
@@ -412,6 +413,7 @@ def _run(args: argparse.Namespace) -> int:
         target=args.target,
         budget=args.budget,
         jobs=args.jobs,
+        **_patience(args),
         progress=not args.json,
     )
     if args.json:
@@ -800,14 +802,23 @@ def _add_worker(commands: _Subparsers) -> argparse.ArgumentParser:
         default=60.0,
         help="s to wait for new trials once none is queued or running (default 60)",
     )
-    worker.add_argument(
+    _add_storage_patience(worker, "the worker")
+    _add_json(worker)
+    return worker
+
+
+def _add_storage_patience(parser: argparse.ArgumentParser, who: str) -> None:
+    parser.add_argument(
         "--storage-patience",
         type=float,
         help="s to keep trying a database that could be reached and cannot any more (a "
-        "restart, a failover) before stopping (default 300)",
+        f"restart, a failover) before {who} stops (default 300)",
     )
-    _add_json(worker)
-    return worker
+
+
+def _patience(args: argparse.Namespace) -> dict[str, Any]:
+    """``--storage-patience`` as a keyword argument, where it was given."""
+    return {} if args.storage_patience is None else {"storage_patience_s": args.storage_patience}
 
 
 def _worker(args: argparse.Namespace) -> int:
@@ -819,7 +830,7 @@ def _worker(args: argparse.Namespace) -> int:
         jobs=args.jobs,
         heartbeat_s=args.heartbeat,
         idle_timeout_s=args.idle_timeout,
-        **({} if args.storage_patience is None else {"storage_patience_s": args.storage_patience}),
+        **_patience(args),
         progress=not args.json,
     )
     if args.json:

@@ -27,7 +27,7 @@ from .._validate import check_budget, check_seed
 from ..solvers._fidelity import MissCounter, fidelity_record
 from ..storage._dashboard import attach_run_report
 from ..storage._optuna import distributions
-from ..storage._storage import check_workers
+from ..storage._storage import STORAGE_PATIENCE_S, check_storage_patience, check_workers
 from ..study._spec import StudySpec, Targets, load_study
 from ._commands import fit_surrogate
 from ._doe import make_design
@@ -91,6 +91,7 @@ def run(
     target: float | None = None,
     budget: int | None = None,
     jobs: int = 1,
+    storage_patience_s: float = STORAGE_PATIENCE_S,
     progress: bool = True,
 ) -> RunResult:
     """Find coating parameters that meet the study's F60 target.
@@ -108,12 +109,17 @@ def run(
         1: solve in this process. N > 1: N local worker processes verify each
         batch through the storage (not SQLite); 0: queue each batch and wait for
         ``surrogate worker`` processes elsewhere.
+    storage_patience_s : float
+        With ``jobs != 1``, how long the planner keeps trying a database it reached
+        before and cannot reach any more (a restart, a failover) — to queue runs, wait
+        for them and write the result — before it stops (as a worker does).
     progress : bool
         Report each iteration (logger ``surrogate``, on stderr unless configured).
     """
     spec = _with_overrides(study, seed=seed, target=target, budget=budget)
     storage_url = storage or spec.default_storage()
     check_workers(storage_url, jobs)
+    check_storage_patience(storage_patience_s)
     if progress:
         show_progress()
     heartbeat_s = None if jobs == 1 else HEARTBEAT_S
@@ -123,7 +129,13 @@ def run(
         progress=progress,
         dispatch=None
         if jobs == 1
-        else WorkerDispatcher(spec, storage_url, jobs=jobs, progress=progress),
+        else WorkerDispatcher(
+            spec,
+            storage_url,
+            jobs=jobs,
+            storage_patience_s=storage_patience_s,
+            progress=progress,
+        ),
         replay=True,
     )
     fidelity = _Fidelity(LowFidelity(spec)) if spec.low_fidelity else None
@@ -417,14 +429,17 @@ def _result(
         multi,
     )
     # what `surrogate report` reads back: the result as the verify study's attribute
-    verifier.study.set_user_attr("result", json.loads(json.dumps(result.to_json())))
-    attach_run_report(
-        verifier.study,
-        target_n=target_of(spec),
-        tolerance=spec.targets.tolerance,
-        records=list(verifier.records.values()),
-        chosen_number=None if chosen is None else chosen.number,
-        note=_note(spec, result),
+    stored = json.loads(json.dumps(result.to_json()))
+    verifier.patient(lambda: verifier.study.set_user_attr("result", stored))
+    verifier.patient(
+        lambda: attach_run_report(
+            verifier.study,
+            target_n=target_of(spec),
+            tolerance=spec.targets.tolerance,
+            records=list(verifier.records.values()),
+            chosen_number=None if chosen is None else chosen.number,
+            note=_note(spec, result),
+        )
     )
     return result
 

@@ -27,7 +27,7 @@ import logging
 import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import numpy as np
 import optuna
@@ -38,7 +38,7 @@ from ..solvers._base import result_settings
 from ..solvers._batch import solve_inputs, solver_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..storage._optuna import quiet_optuna, suggest
-from ..storage._storage import MAX_RETRY, open_storage, retry_callback, storage_errors
+from ..storage._storage import MAX_RETRY, Patience, open_storage, retry_callback, storage_errors
 from ..study._spec import StudySpec, Targets
 from ._objective import constraint_values, is_feasible, meets_target, relative_misfit
 
@@ -93,7 +93,18 @@ class Verification:
         return self.status == "ok"
 
 
-Dispatch = Callable[[optuna.Study, list[dict[str, float]], str], dict[str, Verification]]
+_T = TypeVar("_T")
+
+
+class Dispatch(Protocol):
+    """Verifies a batch of points through the storage's workers
+    (:class:`surrogate.identify._worker.WorkerDispatcher`)."""
+
+    patience: Patience  # rides out a database that cannot be reached for a while
+
+    def __call__(
+        self, study: optuna.Study, points: list[dict[str, float]], phase: str
+    ) -> dict[str, Verification]: ...
 
 
 def verify_study_name(spec: StudySpec) -> str:
@@ -422,6 +433,11 @@ class Verifier:
         """Count this plan's finished runs the loop did not reach (a smaller budget)."""
         self.records.update(self._replay)
         self._replay.clear()
+
+    def patient(self, step: Callable[[], _T]) -> _T:
+        """``step``, a storage write safe to repeat: where workers share the storage, it
+        rides out a database that cannot be reached for a while, as they do."""
+        return step() if self.dispatch is None else self.dispatch.patience(step)
 
     @property
     def calls(self) -> int:

@@ -124,7 +124,7 @@ class WorkerDispatcher:
     def __call__(
         self, study: optuna.Study, points: list[dict[str, float]], phase: str
     ) -> dict[str, Verification]:
-        keys = enqueue(study, self.spec, points, phase=phase)
+        keys = self.patience(lambda: enqueue(study, self.spec, points, phase=phase))  # repeatable
         if self.jobs > 0:
             todo = len(set(keys) - set(finished_records(study, keys)))
             work(  # one point: this process, no start-up cost
@@ -159,11 +159,8 @@ class WorkerDispatcher:
             if self.progress and time.monotonic() - said >= self.heartbeat_s:
                 said = time.monotonic()
                 open_keys = wanted - records.keys()
-                states = [
-                    t.state
-                    for t in study.get_trials(deepcopy=False)
-                    if t.user_attrs.get("input_hash") in open_keys
-                ]
+                trials = self.patience(lambda: study.get_trials(deepcopy=False))
+                states = [t.state for t in trials if t.user_attrs.get("input_hash") in open_keys]
                 logger.info(
                     "[%s] %s: waiting for %d of %d runs (%d queued, %d running)",
                     self.spec.name,

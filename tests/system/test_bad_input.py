@@ -181,6 +181,11 @@ CASES = [
         ["worker", "paper_coating.toml", "--storage", "{d}/study.log", "--storage-patience", "-1"],
     ),
     (
+        "run-storage-patience-negative",
+        {},
+        ["run", "paper_coating.toml", "--jobs", "0", "--storage-patience", "-1"],
+    ),
+    (
         "storage-study-not-planned",
         {"other.toml": _study('name = "paper-coating"', 'name = "other"')},
         ["worker", "other.toml", "--storage", "{d}/study.log"],
@@ -248,6 +253,7 @@ SAYS = {
     "each of the 4 condition groups)",
     "calibrate-study-budget-below-design": "[budget] calibration_solver_calls 11 is too small",
     "storage-patience-negative": "--storage-patience must be ≥ 0 s, got -1.0",
+    "run-storage-patience-negative": "--storage-patience must be ≥ 0 s, got -1.0",
     "storage-memory-worker": "starts empty in every process, so a worker would find nothing",
     "storage-memory-dashboard": "so the dashboard would find nothing in it",
     "storage-memory-report": "so the report would find nothing in it",

@@ -5,6 +5,9 @@ with one line saying so. Real PostgreSQL servers, stopped and started again."""
 from __future__ import annotations
 
 import collections
+import contextlib
+import logging
+import threading
 import time
 
 import optuna
@@ -12,10 +15,14 @@ import psycopg
 import pytest
 import sqlalchemy.exc
 
-from surrogate.storage._storage import unreachable
+from surrogate.identify._doe import make_design
+from surrogate.identify._verify import Verifier, open_verify_study
+from surrogate.identify._worker import WorkerDispatcher
+from surrogate.storage._storage import open_storage, unreachable
+from surrogate.study._spec import load_study
 from tests.components import ComponentMissing, create_database, missing, postgres_control
 from tests.components import throwaway_postgres as _throwaway_postgres
-from tests.workers.fixed_cost import events
+from tests.workers.fixed_cost import FixedCostSolve, events
 from tests.workers.test_workers import _plan, _trials, _wait_for, _worker
 
 TrialState = optuna.trial.TrialState
@@ -68,6 +75,49 @@ def test_past_its_patience_a_worker_stops_with_one_line(server, tmp_path, study_
     assert code != 0
     last = stderr.strip().splitlines()[-1]
     assert "cannot use the storage" in last and "--storage-patience 2 s" in last, stderr
+
+
+@pytest.mark.slow
+def test_a_planner_queues_and_writes_through_a_database_restart(
+    server, tmp_path, study_file, caplog
+):
+    """The planner's own writes ride out an outage as its waits do: the next phase's runs
+    are queued once the database is back (each run solved once), and so is the result.
+    Before, the queueing raised at once and the planner stopped between two phases."""
+    url = create_database(server, "planner")
+    spec = load_study(study_file)
+    study = open_verify_study(spec, url, heartbeat_s=1)
+    log = tmp_path / "solver.log"
+    dispatcher = WorkerDispatcher(
+        spec, url, jobs=1, heartbeat_s=1, solve=FixedCostSolve(log, 0.0), progress=False
+    )
+    points = make_design("lhs", spec.space, n=4, seed=3).to_dict("records")
+    with caplog.at_level(logging.WARNING, logger="surrogate"):
+        with _down_for(server, 3.0):
+            records = dispatcher(study, points, "plan")
+        assert len(records) == 4 and all(r.ok for r in records.values())
+        starts = collections.Counter(k for e, k, _ in events(log) if e == "start")
+        assert starts == dict.fromkeys(records, 1)
+        verifier = Verifier(spec, study, progress=False, dispatch=dispatcher)
+        with _down_for(server, 3.0):
+            verifier.patient(lambda: study.set_user_attr("result", {"status": "written"}))
+    stored = optuna.load_study(study_name=study.study_name, storage=open_storage(url))
+    assert stored.user_attrs["result"] == {"status": "written"}
+    said = [r.getMessage() for r in caplog.records]
+    assert sum("cannot be reached" in m for m in said) == 2, said
+    assert sum("is back after" in m for m in said) == 2, said
+
+
+@contextlib.contextmanager
+def _down_for(server, seconds):
+    """Stop ``server`` now and start it again after ``seconds``, while the block runs."""
+    postgres_control(server, "stop")
+    timer = threading.Timer(seconds, postgres_control, (server, "start"))
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.join()
 
 
 def _chained(error):
