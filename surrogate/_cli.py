@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from ._errors import InputDataError, SolverError
+from ._errors import InputDataError, Interrupted, SolverError
 from ._io import atomic_write_text
 from ._log import show_progress
 from .solvers import available_solvers
@@ -884,6 +884,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.handler(args))
     except InputDataError as error:
         _fail(f"error: {error}", EXIT_USAGE)
+    except Interrupted as error:  # 143 or 130, as a shell reports a process the signal killed
+        _fail(str(error), 128 + int(getattr(signal, error.signal_name)))
     except SolverError as error:
         _fail(f"solver error: {error}", EXIT_SOLVER)
     except IsADirectoryError as error:

@@ -6,7 +6,7 @@ that knows nothing of this package still handles them (BoTorch's habit).
 
 from __future__ import annotations
 
-__all__ = ["InputDataError", "SolverError", "SurrogateError"]
+__all__ = ["InputDataError", "Interrupted", "SolverError", "SurrogateError"]
 
 
 class SurrogateError(Exception):
@@ -26,3 +26,14 @@ class SolverError(SurrogateError, RuntimeError):
     Raised instead of returning a wrong curve (e.g. Newton did not converge at
     some angle). The message names the angle and the likely cause.
     """
+
+
+class Interrupted(SurrogateError):
+    """A signal (SIGTERM, SIGINT) stopped the command; ``signal_name`` names it.
+
+    What was finished is in the storage; the message says how to resume.
+    """
+
+    def __init__(self, signal_name: str, message: str) -> None:
+        super().__init__(message)
+        self.signal_name = signal_name

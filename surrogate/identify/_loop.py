@@ -25,7 +25,6 @@ from .._log import show_progress
 from .._pool import one_blas_thread_within
 from .._validate import check_budget, check_seed
 from ..solvers._fidelity import MissCounter, fidelity_record
-from ..storage._dashboard import attach_run_report
 from ..storage._optuna import distributions
 from ..storage._storage import STORAGE_PATIENCE_S, check_storage_patience, check_workers
 from ..study._spec import StudySpec, Targets, load_study
@@ -428,18 +427,10 @@ def _result(
         message,
         multi,
     )
-    # what `surrogate report` reads back: the result as the verify study's attribute
-    stored = json.loads(json.dumps(result.to_json()))
-    verifier.patient(lambda: verifier.study.set_user_attr("result", stored))
-    verifier.patient(
-        lambda: attach_run_report(
-            verifier.study,
-            target_n=target_of(spec),
-            tolerance=spec.targets.tolerance,
-            records=list(verifier.records.values()),
-            chosen_number=None if chosen is None else chosen.number,
-            note=_note(spec, result),
-        )
+    verifier.publish(
+        json.loads(json.dumps(result.to_json())),
+        chosen_number=None if chosen is None else chosen.number,
+        note=_note(spec, result),
     )
     return result
 

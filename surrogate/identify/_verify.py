@@ -37,6 +37,7 @@ from .._errors import InputDataError
 from ..solvers._base import result_settings
 from ..solvers._batch import solve_inputs, solver_inputs
 from ..solvers._cache import ResultCache, input_hash
+from ..storage._dashboard import attach_run_report
 from ..storage._optuna import quiet_optuna, suggest
 from ..storage._storage import MAX_RETRY, Patience, open_storage, retry_callback, storage_errors
 from ..study._spec import StudySpec, Targets
@@ -438,6 +439,21 @@ class Verifier:
         """``step``, a storage write safe to repeat: where workers share the storage, it
         rides out a database that cannot be reached for a while, as they do."""
         return step() if self.dispatch is None else self.dispatch.patience(step)
+
+    def publish(self, result: Mapping[str, Any], *, chosen_number: int | None, note: str) -> None:
+        """The run's result as the verify study's attribute (what ``surrogate report``
+        reads back), and the dashboard's figure of the verified curves and its note."""
+        self.patient(lambda: self.study.set_user_attr("result", dict(result)))
+        self.patient(
+            lambda: attach_run_report(
+                self.study,
+                target_n=target_of(self.spec),
+                tolerance=self.spec.targets.tolerance,
+                records=list(self.records.values()),
+                chosen_number=chosen_number,
+                note=note,
+            )
+        )
 
     @property
     def calls(self) -> int:

@@ -33,7 +33,7 @@ from typing import Any
 import optuna
 from optuna.trial import TrialState
 
-from .._errors import InputDataError
+from .._errors import InputDataError, Interrupted
 from .._log import show_progress
 from .._pool import check_jobs, one_blas_thread, one_blas_thread_within, process_context
 from ..solvers._batch import solve_inputs
@@ -45,6 +45,7 @@ from ..storage._storage import (
     check_storage_patience,
     check_workers,
     open_storage,
+    redacted_url,
     retry_callback,
     storage_errors,
     unreachable,
@@ -126,17 +127,19 @@ class WorkerDispatcher:
     ) -> dict[str, Verification]:
         keys = self.patience(lambda: enqueue(study, self.spec, points, phase=phase))  # repeatable
         if self.jobs > 0:
-            todo = len(set(keys) - set(finished_records(study, keys)))
-            work(  # one point: this process, no start-up cost
+            todo = len(set(keys) - set(self.patience(lambda: finished_records(study, keys))))
+            done = work(  # one point: this process, no start-up cost
                 self.spec,
                 storage=self.storage,
                 jobs=max(1, min(self.jobs, todo)),
                 heartbeat_s=self.heartbeat_s,
                 idle_timeout_s=0.0,
                 storage_patience_s=self.patience.patience_s,
+                storage_reached=True,
                 solve=self.solve,
                 progress=False,
             )
+            self._stopped(done, phase)
         elif self.progress:
             logger.info(
                 "[%s] %s: %d runs queued in %s; waiting for `surrogate worker` processes",
@@ -146,6 +149,26 @@ class WorkerDispatcher:
                 self.storage,
             )
         return self._wait(study, keys, phase)
+
+    def _stopped(self, done: WorkerResult, phase: str) -> None:
+        """Stop where a signal stopped the local workers (before, the planner went on
+        waiting for the runs they had given back, for ever); say so where one died."""
+        if done.interrupted in _SIGNAL_NAMES:
+            raise Interrupted(
+                done.interrupted,
+                f"{phase} of {self.spec.name!r} stopped by {done.interrupted}: the runs "
+                f"finished are kept in {redacted_url(self.storage)}; the same command "
+                "resumes the plan (nothing is solved twice)",
+            )
+        if done.interrupted is not None:
+            logger.warning(
+                "[%s] %s: %s; its run goes to any `surrogate worker` on %s once it is "
+                "found stale (or stop and run the same command again)",
+                self.spec.name,
+                phase,
+                done.interrupted,
+                redacted_url(self.storage),
+            )
 
     def _wait(self, study: optuna.Study, keys: list[str], phase: str) -> dict[str, Verification]:
         """Until every run of ``keys`` is over; says what it waits for every heartbeat."""
@@ -207,6 +230,7 @@ def work(
     heartbeat_s: int = HEARTBEAT_S,
     idle_timeout_s: float = 60.0,
     storage_patience_s: float = STORAGE_PATIENCE_S,
+    storage_reached: bool = False,
     solve: Solve = solve_inputs,
     progress: bool = True,
 ) -> WorkerResult:
@@ -228,6 +252,11 @@ def work(
     storage_patience_s : float
         Once connected, ride out a database that cannot be reached for this long
         (a restart, a failover) before stopping with a one-line error.
+    storage_reached : bool
+        The caller reached the storage before (the planner): the worker's start rides out
+        an outage too. Otherwise a database it cannot reach at its start stops it at once.
+        Its worker processes (``jobs`` > 1) start after this one reached it, and ride
+        out an outage at their start either way.
     solve : callable
         The full solver on :func:`surrogate.identify._verify.verification_inputs`
         (tests pass a cheap stand-in here; a study file cannot).
@@ -245,11 +274,14 @@ def work(
     if progress:
         show_progress()
     options: dict[str, Any] = {"heartbeat_s": heartbeat_s, "patience_s": storage_patience_s}
-    worker = _Worker(spec, storage, **options, solve=solve, progress=progress)
+    worker = _Worker(
+        spec, storage, **options, reached=storage_reached, solve=solve, progress=progress
+    )
     if jobs == 1:
         counts = worker.loop(idle_timeout_s)
     else:
         worker.close()
+        options["reached"] = True  # by this process, just now
         counts = _work_in_processes(spec, storage, jobs, options, idle_timeout_s, solve, progress)
     return WorkerResult(verify_study_name(spec), storage, jobs, **counts)
 
@@ -329,19 +361,25 @@ class _Worker:
         *,
         heartbeat_s: int,
         patience_s: float,
+        reached: bool = False,
         solve: Solve,
         progress: bool,
     ) -> None:
         self.url = storage
-        # get_storage: the study and this worker share one (cached) storage object
-        self.storage: Any = optuna.storages.get_storage(
-            open_storage(storage, heartbeat_s=heartbeat_s, must_exist=True)
+        self._stop: str | None = None
+        self.patience = Patience(
+            storage, patience_s, grace_s=3 * heartbeat_s, stopping=lambda: self._stop is not None
         )
-        with storage_errors(storage):
+
+        def start() -> tuple[Any, optuna.Study, int]:
+            # get_storage: the study and this worker share one (cached) storage object
+            opened: Any = optuna.storages.get_storage(
+                open_storage(storage, heartbeat_s=heartbeat_s, must_exist=True)
+            )
             try:
-                self.study = optuna.load_study(
+                study = optuna.load_study(
                     study_name=verify_study_name(spec),
-                    storage=self.storage,
+                    storage=opened,
                     sampler=optuna.samplers.RandomSampler(),
                 )
             except KeyError:
@@ -349,8 +387,11 @@ class _Worker:
                     f"no study {verify_study_name(spec)!r} in {storage}; plan it first: "
                     f"surrogate run {spec.path} --storage {storage} --jobs 0"
                 ) from None
+            return opened, study, opened.get_study_id_from_name(verify_study_name(spec))
+
+        with storage_errors(storage):  # a database never reached is not waited for
+            self.storage, self.study, self.study_id = self.patience(start) if reached else start()
         self.spec = as_planned(spec, self.study.user_attrs)
-        self.study_id = self.storage.get_study_id_from_name(verify_study_name(spec))
         self.heartbeat_s = heartbeat_s
         self.solve = solve
         self.progress = progress
@@ -363,10 +404,6 @@ class _Worker:
             "interrupted": None,
         }
         self._solving = False
-        self._stop: str | None = None
-        self.patience = Patience(
-            storage, patience_s, grace_s=3 * heartbeat_s, stopping=lambda: self._stop is not None
-        )
 
     def close(self) -> None:
         engine = getattr(getattr(self.storage, "_backend", self.storage), "engine", None)
@@ -536,6 +573,7 @@ class _Worker:
 
 
 _SIGNALS = (signal.SIGTERM, signal.SIGINT)
+_SIGNAL_NAMES = {signal.Signals(number).name for number in _SIGNALS}
 _OTHER_INPUTS = {
     "status": "failed",
     "reason": "this worker's solver inputs differ from the planner's (another solver "

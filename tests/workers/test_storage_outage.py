@@ -14,11 +14,12 @@ import optuna
 import psycopg
 import pytest
 import sqlalchemy.exc
+from optuna_dashboard import get_note
 
 from surrogate.identify._doe import make_design
 from surrogate.identify._verify import Verifier, open_verify_study
-from surrogate.identify._worker import WorkerDispatcher
-from surrogate.storage._storage import open_storage, unreachable
+from surrogate.identify._worker import WorkerDispatcher, work
+from surrogate.storage._storage import StorageError, open_storage, unreachable
 from surrogate.study._spec import load_study
 from tests.components import ComponentMissing, create_database, missing, postgres_control
 from tests.components import throwaway_postgres as _throwaway_postgres
@@ -89,7 +90,13 @@ def test_a_planner_queues_and_writes_through_a_database_restart(
     study = open_verify_study(spec, url, heartbeat_s=1)
     log = tmp_path / "solver.log"
     dispatcher = WorkerDispatcher(
-        spec, url, jobs=1, heartbeat_s=1, solve=FixedCostSolve(log, 0.0), progress=False
+        spec,
+        url,
+        jobs=1,
+        heartbeat_s=1,
+        storage_patience_s=60.0,
+        solve=FixedCostSolve(log, 0.0),
+        progress=False,
     )
     points = make_design("lhs", spec.space, n=4, seed=3).to_dict("records")
     with caplog.at_level(logging.WARNING, logger="surrogate"):
@@ -100,24 +107,60 @@ def test_a_planner_queues_and_writes_through_a_database_restart(
         assert starts == dict.fromkeys(records, 1)
         verifier = Verifier(spec, study, progress=False, dispatch=dispatcher)
         with _down_for(server, 3.0):
-            verifier.patient(lambda: study.set_user_attr("result", {"status": "written"}))
+            verifier.publish({"status": "written"}, chosen_number=None, note="the note")
     stored = optuna.load_study(study_name=study.study_name, storage=open_storage(url))
     assert stored.user_attrs["result"] == {"status": "written"}
+    assert get_note(stored) == "the note"
     said = [r.getMessage() for r in caplog.records]
     assert sum("cannot be reached" in m for m in said) == 2, said
     assert sum("is back after" in m for m in said) == 2, said
 
 
+@pytest.mark.slow
+def test_a_worker_started_by_a_planner_rides_out_an_outage_at_its_start(server, study_file):
+    """A planner's local worker starts on a database the planner reached: an outage then
+    is waited for. A worker started on its own on a database it cannot reach stops at
+    once with one line, as the README says (a wrong address is not waited for)."""
+    url = create_database(server, "start")
+    _plan(study_file, url, 2)
+    with _down_for(server, 3.0), pytest.raises(StorageError, match="cannot use the storage"):
+        work(study_file, storage=url, idle_timeout_s=0.0, progress=False)
+    log = study_file.parent / "solver.log"
+    with _down_for(server, 3.0):
+        result = work(
+            study_file,
+            storage=url,
+            heartbeat_s=1,
+            idle_timeout_s=0.0,
+            storage_patience_s=60.0,
+            storage_reached=True,
+            solve=FixedCostSolve(log, 0.0),
+            progress=False,
+        )
+    assert result.runs == result.ok == 2
+
+
 @contextlib.contextmanager
 def _down_for(server, seconds):
-    """Stop ``server`` now and start it again after ``seconds``, while the block runs."""
+    """Stop ``server`` now and start it again after ``seconds``, while the block runs; an
+    error of the start is raised here."""
     postgres_control(server, "stop")
-    timer = threading.Timer(seconds, postgres_control, (server, "start"))
+    errors = []
+
+    def start():
+        try:
+            postgres_control(server, "start")
+        except Exception as error:  # raised in the test's thread, below
+            errors.append(error)
+
+    timer = threading.Timer(seconds, start)
     timer.start()
     try:
         yield
     finally:
         timer.join()
+        if errors:
+            raise errors[0]
 
 
 def _chained(error):

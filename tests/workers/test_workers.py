@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import collections
 import itertools
+import json
 import os
 import signal
 import subprocess
@@ -268,6 +269,48 @@ def test_sigterm_fails_the_trial_and_another_worker_redoes_it(study_file, storag
     assert sorted(t.user_attrs["input_hash"] for t in complete) == sorted(keys)
     dones = collections.Counter(k for e, k, _ in events(log) if e == "done")
     assert dones == dict.fromkeys(keys, 1)
+
+
+def test_a_planner_stopped_by_sigterm_while_its_workers_solve_stops_and_resumes(
+    study_file, tmp_path
+):
+    """``surrogate run --jobs 2`` passes SIGTERM to its worker processes, which give their
+    runs back; the planner then stops with 143 and one line. Before, it went on waiting
+    for the runs given back, which nothing would run (it hung until SIGKILL). The same
+    command resumes: every run of the plan is finished once."""
+    storage_url = f"journal://{tmp_path / 'study.log'}"
+    log = tmp_path / "solver.log"
+    args = [study_file, "--storage", storage_url, "--jobs", 2, "--budget", 6, "--json"]
+    planner = _process("tests.workers.fixed_cost_planner", log, 60.0, *args)
+    try:
+        _wait_for(lambda: len([e for e, _, _ in events(log) if e == "start"]) >= 2)
+        planner.send_signal(signal.SIGTERM)
+        _, stderr = planner.communicate(timeout=60)
+    finally:  # the code before hung here: leave nothing running
+        if planner.poll() is None:
+            planner.kill()
+            planner.wait(timeout=30)
+    assert planner.returncode == 143, stderr
+    last = stderr.strip().splitlines()[-1]
+    assert "stopped by SIGTERM" in last and "the same command resumes" in last, stderr
+    trials = _trials(study_file, storage_url)
+    assert not [t for t in trials if t.state == TrialState.RUNNING]
+    given_back = [t for t in trials if t.system_attrs.get("interrupted") == "SIGTERM"]
+    assert len(given_back) == 2
+    queued = {t.user_attrs["input_hash"] for t in trials if t.state == TrialState.WAITING}
+    assert {t.user_attrs["input_hash"] for t in given_back} <= queued
+
+    again = _process("tests.workers.fixed_cost_planner", log, 0.0, *args)
+    stdout, stderr = again.communicate(timeout=120)
+    assert again.returncode == 0, stderr
+    assert json.loads(stdout)["solver_calls"] == 6
+    trials = _trials(study_file, storage_url)
+    finished = collections.Counter(
+        t.user_attrs["input_hash"] for t in trials if t.state == TrialState.COMPLETE
+    )
+    assert len(finished) == 6 and set(finished.values()) == {1}
+    dones = collections.Counter(k for e, k, _ in events(log) if e == "done")
+    assert dones == finished
 
 
 def test_a_solver_failure_is_a_fail_trial_with_its_reason_and_the_loop_goes_on(
