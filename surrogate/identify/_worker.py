@@ -40,6 +40,7 @@ from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..storage._optuna import quiet_optuna, suggest
 from ..storage._storage import (
+    MAX_RETRY,
     STORAGE_PATIENCE_S,
     Patience,
     check_storage_patience,
@@ -127,19 +128,7 @@ class WorkerDispatcher:
     ) -> dict[str, Verification]:
         keys = self.patience(lambda: enqueue(study, self.spec, points, phase=phase))  # repeatable
         if self.jobs > 0:
-            todo = len(set(keys) - set(self.patience(lambda: finished_records(study, keys))))
-            done = work(  # one point: this process, no start-up cost
-                self.spec,
-                storage=self.storage,
-                jobs=max(1, min(self.jobs, todo)),
-                heartbeat_s=self.heartbeat_s,
-                idle_timeout_s=0.0,
-                storage_patience_s=self.patience.patience_s,
-                storage_reached=True,
-                solve=self.solve,
-                progress=False,
-            )
-            self._stopped(done, phase)
+            self._work(study, keys, phase)
         elif self.progress:
             logger.info(
                 "[%s] %s: %d runs queued in %s; waiting for `surrogate worker` processes",
@@ -150,24 +139,39 @@ class WorkerDispatcher:
             )
         return self._wait(study, keys, phase)
 
-    def _stopped(self, done: WorkerResult, phase: str) -> None:
-        """Stop where a signal stopped the local workers (before, the planner went on
-        waiting for the runs they had given back, for ever); say so where one died."""
-        if done.interrupted in _SIGNAL_NAMES:
-            raise Interrupted(
-                done.interrupted,
-                f"{phase} of {self.spec.name!r} stopped by {done.interrupted}: the runs "
-                f"finished are kept in {redacted_url(self.storage)}; the same command "
-                "resumes the plan (nothing is solved twice)",
+    def _work(self, study: optuna.Study, keys: list[str], phase: str) -> None:
+        """The local workers, until the batch's runs are over or given back by a signal.
+
+        A worker process that died left its trial RUNNING; the next round's workers find
+        it stale, fail it and redo its copy, so a round is started again while runs are
+        open (a run whose worker dies ``MAX_RETRY + 1`` times is over, as failed). Before,
+        the planner waited for ever for the copy, which nothing here would run."""
+        for _ in range(MAX_RETRY + 1):
+            todo = set(keys) - set(self.patience(lambda: finished_records(study, keys)))
+            if not todo:
+                return
+            done = work(  # one point: this process, no start-up cost
+                self.spec,
+                storage=self.storage,
+                jobs=max(1, min(self.jobs, len(todo))),
+                heartbeat_s=self.heartbeat_s,
+                idle_timeout_s=0.0,
+                storage_patience_s=self.patience.patience_s,
+                storage_reached=True,
+                solve=self.solve,
+                progress=False,
             )
-        if done.interrupted is not None:
+            if done.interrupted in _SIGNAL_NAMES:
+                raise Interrupted(
+                    done.interrupted,
+                    f"{phase} of {self.spec.name!r} stopped by {done.interrupted}: the runs "
+                    f"finished are kept in {redacted_url(self.storage)}; the same command "
+                    "resumes the plan (nothing is solved twice)",
+                )
+            if done.interrupted is None:
+                return
             logger.warning(
-                "[%s] %s: %s; its run goes to any `surrogate worker` on %s once it is "
-                "found stale (or stop and run the same command again)",
-                self.spec.name,
-                phase,
-                done.interrupted,
-                redacted_url(self.storage),
+                "[%s] %s: %s; its run is redone", self.spec.name, phase, done.interrupted
             )
 
     def _wait(self, study: optuna.Study, keys: list[str], phase: str) -> dict[str, Verification]:

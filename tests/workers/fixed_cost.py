@@ -26,10 +26,21 @@ from surrogate.storage._storage import STORAGE_PATIENCE_S
 class FixedCostSolve:
     """Sleeps ``cost_s``, returns a smooth curve of the coating's stiffness."""
 
-    def __init__(self, log: str | Path, cost_s: float, *, fail_above_tcoat_mm: float = np.inf):
+    def __init__(
+        self,
+        log: str | Path,
+        cost_s: float,
+        *,
+        fail_above_tcoat_mm: float = np.inf,
+        deaths: tuple[str | Path, int] | None = None,
+    ):
+        """``deaths = (folder, n)``: the first ``n`` solves (of any process) each write a
+        file ``death-K`` into ``folder`` and die there (``os._exit``), as a worker the
+        kernel killed."""
         self.log = str(log)
         self.cost_s = cost_s
         self.fail_above_tcoat_mm = fail_above_tcoat_mm
+        self.deaths = None if deaths is None else (str(deaths[0]), deaths[1])
 
     def _write(self, event: str, key: str) -> None:
         with open(self.log, "a", encoding="utf-8") as handle:
@@ -38,6 +49,14 @@ class FixedCostSolve:
     def __call__(self, inputs: dict[str, Any]) -> dict[str, Any]:
         key = input_hash(inputs)
         self._write("start", key)
+        if self.deaths is not None:
+            folder, n = self.deaths
+            for k in range(n):
+                try:
+                    (Path(folder) / f"death-{k}").touch(exist_ok=False)
+                except FileExistsError:
+                    continue
+                os._exit(9)
         time.sleep(self.cost_s)
         params = inputs["params"]
         if params["tcoat_mm"] > self.fail_above_tcoat_mm:

@@ -8,6 +8,7 @@ file and on a throwaway PostgreSQL server.
 from __future__ import annotations
 
 import collections
+import contextlib
 import itertools
 import json
 import os
@@ -22,7 +23,7 @@ import pytest
 
 from surrogate.identify._doe import make_design
 from surrogate.identify._verify import enqueue, open_verify_study
-from surrogate.identify._worker import work
+from surrogate.identify._worker import WorkerDispatcher, work
 from surrogate.storage._storage import MAX_RETRY, open_storage
 from surrogate.study._spec import load_study
 from tests.test_journal_lock import die_inside_the_lock
@@ -311,6 +312,45 @@ def test_a_planner_stopped_by_sigterm_while_its_workers_solve_stops_and_resumes(
     assert len(finished) == 6 and set(finished.values()) == {1}
     dones = collections.Counter(k for e, k, _ in events(log) if e == "done")
     assert dones == finished
+
+
+def test_a_planners_worker_processes_that_die_have_their_runs_redone(study_file, tmp_path):
+    """``run --jobs 2``: both local worker processes die mid-solve; the planner starts
+    its workers again, which find the runs stale and redo them. Before, the planner
+    waited for ever for the copies, which nothing would run."""
+    storage_url = f"journal://{tmp_path / 'study.log'}"
+    spec = load_study(study_file)
+    study = open_verify_study(spec, storage_url, heartbeat_s=1)
+    log = tmp_path / "solver.log"
+    solve = FixedCostSolve(log, 0.2, deaths=(tmp_path, 2))
+    dispatcher = WorkerDispatcher(
+        spec, storage_url, jobs=2, heartbeat_s=1, solve=solve, progress=False
+    )
+    points = make_design("lhs", spec.space, n=4, seed=3).to_dict("records")
+    with _alarm(120, "the planner still waits for the dead worker's run"):
+        found = dispatcher(study, points, "plan")
+    assert (tmp_path / "death-1").exists()
+    assert len(found) == 4 and all(record.ok for record in found.values())
+    starts = collections.Counter(k for e, k, _ in events(log) if e == "start")
+    dones = collections.Counter(k for e, k, _ in events(log) if e == "done")
+    assert dones == dict.fromkeys(found, 1)
+    assert sorted(starts.values()) == [1, 1, 2, 2]  # the dead workers' runs, redone once
+
+
+@contextlib.contextmanager
+def _alarm(seconds, message):
+    """``TimeoutError(message)`` in this (the main) thread if the block takes longer."""
+
+    def ring(signum, frame):
+        raise TimeoutError(message)
+
+    previous = signal.signal(signal.SIGALRM, ring)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def test_a_solver_failure_is_a_fail_trial_with_its_reason_and_the_loop_goes_on(
