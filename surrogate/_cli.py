@@ -886,6 +886,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         _fail(f"error: {error}", EXIT_USAGE)
     except Interrupted as error:  # 143 or 130, as a shell reports a process the signal killed
         _fail(str(error), 128 + int(getattr(signal, error.signal_name)))
+    except KeyboardInterrupt:
+        _fail("interrupted (Ctrl-C)", 128 + int(signal.SIGINT))
     except SolverError as error:
         _fail(f"solver error: {error}", EXIT_SOLVER)
     except IsADirectoryError as error:

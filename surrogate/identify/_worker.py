@@ -33,7 +33,7 @@ from typing import Any
 import optuna
 from optuna.trial import TrialState
 
-from .._errors import InputDataError, Interrupted
+from .._errors import InputDataError, Interrupted, SolverError, SurrogateError
 from .._log import show_progress
 from .._pool import check_jobs, one_blas_thread, one_blas_thread_within, process_context
 from ..solvers._batch import solve_inputs
@@ -144,16 +144,20 @@ class WorkerDispatcher:
 
         A worker process that died left its trial RUNNING; the next round's workers find
         it stale, fail it and redo its copy, so a round is started again while runs are
-        open (a run whose worker dies ``MAX_RETRY + 1`` times is over, as failed). Before,
-        the planner waited for ever for the copy, which nothing here would run."""
+        open (a run whose worker dies ``MAX_RETRY + 1`` times is over, as failed), in
+        worker processes (a solve that kills its process is not run in the planner's).
+        Before, the planner waited for ever for the copy, which nothing here would run.
+        Runs still open after ``MAX_RETRY + 1`` rounds stop the planner with one line."""
+        died = None
         for _ in range(MAX_RETRY + 1):
             todo = set(keys) - set(self.patience(lambda: finished_records(study, keys)))
             if not todo:
                 return
-            done = work(  # one point: this process, no start-up cost
+            least = 1 if died is None else 2  # 1: one point in this process, no start-up cost
+            done = work(
                 self.spec,
                 storage=self.storage,
-                jobs=max(1, min(self.jobs, len(todo))),
+                jobs=max(least, min(self.jobs, len(todo))),
                 heartbeat_s=self.heartbeat_s,
                 idle_timeout_s=0.0,
                 storage_patience_s=self.patience.patience_s,
@@ -170,8 +174,15 @@ class WorkerDispatcher:
                 )
             if done.interrupted is None:
                 return
-            logger.warning(
-                "[%s] %s: %s; its run is redone", self.spec.name, phase, done.interrupted
+            died = done.interrupted
+            logger.warning("[%s] %s: %s; its run is redone", self.spec.name, phase, died)
+        todo = set(keys) - set(self.patience(lambda: finished_records(study, keys)))
+        if todo:
+            raise SolverError(
+                f"{phase} of {self.spec.name!r}: {len(todo)} runs still open after "
+                f"{MAX_RETRY + 1} rounds of local worker processes ({died}); start "
+                f"`surrogate worker` processes on {redacted_url(self.storage)}, or run the "
+                "same command again (the runs finished are kept)"
             )
 
     def _wait(self, study: optuna.Study, keys: list[str], phase: str) -> dict[str, Verification]:
@@ -314,7 +325,10 @@ def _work_in_processes(
     for process in processes:
         process.start()
 
+    received: list[str] = []  # the signals this process got, whatever its children did
+
     def forward(signum: int, frame: Any) -> None:
+        received.append(signal.Signals(signum).name)
         for process in processes:
             if process.pid is not None and process.is_alive():
                 process.terminate()
@@ -325,17 +339,28 @@ def _work_in_processes(
             while process.is_alive():
                 process.join(timeout=0.5)
     except KeyboardInterrupt:  # the children got SIGINT too and clean up
+        received.append("SIGINT")
         for process in processes:
             process.join()
     finally:
         signal.signal(signal.SIGTERM, previous)
     counts: dict[str, Any] = {"runs": 0, "ok": 0, "failed": 0, "solved": 0, "interrupted": None}
+    errors = []
     while not results.empty():
         child = results.get()
+        if "error" in child:
+            errors.append(child["error"])
+            continue
         for name in ("runs", "ok", "failed", "solved"):
             counts[name] += child[name]
         counts["interrupted"] = counts["interrupted"] or child["interrupted"]
-    if any(p.exitcode not in (0, None) for p in processes) and counts["interrupted"] is None:
+    if received:  # also where a child got it before or after its own handlers
+        counts["interrupted"] = received[0]
+    elif errors:  # one line, as this process would have said it
+        raise errors[0]
+    elif counts["interrupted"] is not None:  # a child alone was signalled
+        counts["interrupted"] = f"a worker process was stopped by {counts['interrupted']}"
+    elif any(p.exitcode not in (0, None) for p in processes):
         counts["interrupted"] = "a worker process died"
     return counts
 
@@ -351,8 +376,13 @@ def _process_main(
 ) -> None:
     one_blas_thread()
     quiet_optuna()
-    worker = _Worker(spec, storage, **options, solve=solve, progress=progress)
-    results.put(worker.loop(idle_timeout_s))
+    try:
+        worker = _Worker(spec, storage, **options, solve=solve, progress=progress)
+        results.put(worker.loop(idle_timeout_s))
+    except SurrogateError as error:  # the parent raises it: one line, not a traceback a child
+        results.put({"error": error})
+    except KeyboardInterrupt:  # Ctrl-C before the worker's handlers: the parent says it
+        pass
 
 
 class _Worker:

@@ -21,6 +21,7 @@ from pathlib import Path
 import optuna
 import pytest
 
+from surrogate._errors import SolverError
 from surrogate.identify._doe import make_design
 from surrogate.identify._verify import enqueue, open_verify_study
 from surrogate.identify._worker import WorkerDispatcher, work
@@ -335,6 +336,45 @@ def test_a_planners_worker_processes_that_die_have_their_runs_redone(study_file,
     dones = collections.Counter(k for e, k, _ in events(log) if e == "done")
     assert dones == dict.fromkeys(found, 1)
     assert sorted(starts.values()) == [1, 1, 2, 2]  # the dead workers' runs, redone once
+
+
+def test_a_planners_worker_processes_that_die_every_round_stop_it_with_one_line(
+    study_file, tmp_path
+):
+    """Local workers that die in every round (each run once a round): after
+    ``MAX_RETRY + 1`` rounds the planner stops, saying what is open and what to do,
+    instead of waiting for ever for runs nothing here will run."""
+    storage_url = f"journal://{tmp_path / 'study.log'}"
+    spec = load_study(study_file)
+    study = open_verify_study(spec, storage_url, heartbeat_s=1)
+    solve = FixedCostSolve(tmp_path / "solver.log", 0.2, deaths=(tmp_path, 2 * (MAX_RETRY + 1)))
+    dispatcher = WorkerDispatcher(
+        spec, storage_url, jobs=2, heartbeat_s=1, solve=solve, progress=False
+    )
+    points = make_design("lhs", spec.space, n=4, seed=3).to_dict("records")
+    with (
+        _alarm(120, "the planner still waits for the dead workers' runs"),
+        pytest.raises(SolverError, match=r"runs still open after 4 rounds of local worker"),
+    ):
+        dispatcher(study, points, "plan")
+    assert (tmp_path / f"death-{2 * MAX_RETRY + 1}").exists()
+
+
+def test_ctrl_c_stops_a_run_with_one_line(study_file, tmp_path):
+    """SIGINT (Ctrl-C) while the planner works: exit 130 and one line, no traceback."""
+    storage = tmp_path / "run.db"
+    planner = _process("surrogate", "run", study_file, "--storage", f"sqlite:///{storage}")
+    try:
+        _wait_for(storage.exists, timeout=60)
+        planner.send_signal(signal.SIGINT)
+        _, stderr = planner.communicate(timeout=60)
+    finally:
+        if planner.poll() is None:
+            planner.kill()
+            planner.wait(timeout=30)
+    assert planner.returncode == 130, stderr
+    assert stderr.strip().splitlines()[-1] == "surrogate: interrupted (Ctrl-C)", stderr
+    assert "Traceback" not in stderr
 
 
 @contextlib.contextmanager
