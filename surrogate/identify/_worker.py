@@ -379,7 +379,7 @@ def _process_main(
     try:
         worker = _Worker(spec, storage, **options, solve=solve, progress=progress)
         results.put(worker.loop(idle_timeout_s))
-    except SurrogateError as error:  # the parent raises it: one line, not a traceback a child
+    except SurrogateError as error:  # the parent raises it: one line, not a child's traceback
         results.put({"error": error})
     except KeyboardInterrupt:  # Ctrl-C before the worker's handlers: the parent says it
         pass
