@@ -9,10 +9,7 @@ if [ ! -x .venv/bin/python ]; then
     "$PYTHON" -m venv .venv
 fi
 .venv/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
-# --no-compile: pip's byte-compiling of every installed module took half the install (64 ->
-# 32 s on a fresh clone, 2-core AMD EPYC, 2026-11-29); Python compiles the few it imports
-# on first use (about 1 s, once) and keeps them.
-.venv/bin/python -m pip install --no-compile --quiet --disable-pip-version-check -e ".[dev]"
+.venv/bin/python -m pip install --quiet --disable-pip-version-check -e ".[dev]"
 # The built-in solver's kernels and the GP likelihood are compiled by numba on their first
 # call and cached beside the source (surrogate/physics/__pycache__, surrogate/gp/__pycache__):
 # compile them here, once, rather than in the first processes of the first run (the suite's
