@@ -148,9 +148,13 @@ class WorkerDispatcher:
         worker processes (a solve that kills its process is not run in the planner's).
         Before, the planner waited for ever for the copy, which nothing here would run.
         Runs still open after ``MAX_RETRY + 1`` rounds stop the planner with one line."""
+
+        def open_runs() -> set[str]:
+            return set(keys) - set(self.patience(lambda: finished_records(study, keys)))
+
         died = None
         for _ in range(MAX_RETRY + 1):
-            todo = set(keys) - set(self.patience(lambda: finished_records(study, keys)))
+            todo = open_runs()
             if not todo:
                 return
             least = 1 if died is None else 2  # 1: one point in this process, no start-up cost
@@ -176,7 +180,7 @@ class WorkerDispatcher:
                 return
             died = done.interrupted
             logger.warning("[%s] %s: %s; its run is redone", self.spec.name, phase, died)
-        todo = set(keys) - set(self.patience(lambda: finished_records(study, keys)))
+        todo = open_runs()
         if todo:
             raise SolverError(
                 f"{phase} of {self.spec.name!r}: {len(todo)} runs still open after "
