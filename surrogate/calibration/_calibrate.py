@@ -93,6 +93,12 @@ class CalibrationResult:
     first-order test of the corrected model held at a point the expensive solver
     verified, whose RMSE is the expensive solver's.
 
+    ``basins``: whether other basins were searched before the result was reported and
+    the local optima found (:class:`~surrogate.calibration._basins.BasinSearch`: where the
+    best local optimum's misfit is systematic, the local phase restarts from diverse
+    points within a share of the budget; ``optima`` best first). With an external full
+    solver, the search ran on the corrected built-in model.
+
     ``retried``: the tests whose run at ``params`` the solver finished only after a
     retry (CalculiX: other increments, after the deck's own stopped short), each with why
     the earlier attempts stopped; the message says so. Near such points CalculiX's curves
@@ -119,6 +125,7 @@ class CalibrationResult:
     message: str
     multi_fidelity: dict[str, Any] | None = None
     retried: dict[str, str] = field(default_factory=dict)
+    basins: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -298,7 +305,7 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
         storage=url,
         message="",
     )
-    message = _message(problem, result, fit)
+    message = _message(problem, result, fit) + loop.basins.sentence(loop.noise)
     retried, sentence = _retried(loop, best)
     message += sentence
     multi = _multi_fidelity(loop, best)
@@ -306,7 +313,13 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
         message += multi.pop("sentence")
         if misfit == "systematic" and isinstance(loop, CorrectedCalibration):
             message += loop.basin_caveat()
-    return replace(result, message=message, multi_fidelity=multi, retried=retried)
+    return replace(
+        result,
+        message=message,
+        multi_fidelity=multi,
+        retried=retried,
+        basins=loop.basins.to_json(),
+    )
 
 
 def _retried(loop: CalibrationLoop, best: VerifiedPoint) -> tuple[dict[str, str], str]:

@@ -843,17 +843,13 @@ def _refused(
 
 def _start(problem: CalibrationProblem, params: dict[str, float]) -> np.ndarray:
     """The calibrated point with the new effect switched off (its nearest bound)."""
-    values = []
-    for spec in problem.space:
-        if spec.name in params:
-            values.append(params[spec.name])
-            continue
-        effect, name = spec.name.split(".", 1)
-        off = next(p.off for p in get_effect(effect).parameters if p.name == name)
-        if math.isnan(off):  # friction: start from the rig's own value
-            off = problem.spec.rig.friction
-        values.append(min(max(off, spec.low), spec.high))
-    return np.array(values, dtype=float)
+    return np.array(
+        [
+            params[spec.name] if spec.name in params else problem.off_value(spec.name)
+            for spec in problem.space
+        ],
+        dtype=float,
+    )
 
 
 # -- the model ladder ---------------------------------------------------------------------------

@@ -303,6 +303,7 @@ class CorrectedCalibration(CalibrationLoop):
         loop.run(surrogate_trials)
         self._counted(low)
         self.iterations += loop.iterations
+        self.basins = replace(loop.basins, reason=f"{loop.basins.reason}, on the corrected model")
         fit, best = loop.best_fit(), loop.best()
         if best is None:
             return None

@@ -27,7 +27,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +40,17 @@ from ..gp import CurveSurrogate
 from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..solvers._fidelity import LOW_FIDELITY
+from ._basins import (
+    BASIN_SHARE,
+    SAME_OPTIMUM_UNIT,
+    SCREEN_EVALUATIONS,
+    BasinSearch,
+    Start,
+    distinct_optima,
+    effect_starts,
+    far_from,
+    optima_record,
+)
 from ._determination import determine
 from ._local import (
     FIRST_ORDER_BOX,
@@ -50,7 +61,7 @@ from ._local import (
     local_fit,
 )
 from ._problem import CalibrationProblem, coat_section
-from ._statistics import misfit_p_value, noise_dof
+from ._statistics import SIGNIFICANCE, misfit_p_value, noise_dof
 
 __all__ = [
     "CalibrationLoop",
@@ -73,6 +84,10 @@ BASIN_CHECKS = 3  # local fits at most: the first basin and up to two others the
 VALLEY_P = 0.05  # a misfit this unlikely under the noise alone: look along the valley
 VALLEY_RMSE = 1.5  # …if within this many times the noise (beyond, the model is at fault)
 VALLEY_STEP = 0.25  # the valley starts: a quarter of a range along the least determined direction
+# the basin search's starts along the least determined direction: these shares of a range
+BASIN_STEPS = (0.25, 0.5)
+REGIONS = 2  # the surrogate's best points in other regions, at most
+REGION_UNIT = 0.2  # …each this far from every optimum found and from each other
 
 _LOG = logging.getLogger(__name__)
 
@@ -91,8 +106,9 @@ class SolverRun:
 class VerifiedPoint:
     """A parameter point run at every condition group (a trial of the calibration study).
 
-    ``phase`` is ``global`` (a surrogate candidate; ``predicted`` its predicted RMSE)
-    or ``local`` (a local fit's end, ``predicted`` None); ``calls`` the solver runs
+    ``phase`` is ``global`` (a surrogate candidate; ``predicted`` its predicted RMSE),
+    ``local`` (a local fit's end, ``predicted`` None) or ``basin`` (where a basin start's
+    short fit ended, :mod:`._basins`); ``calls`` the solver runs
     used when it was verified; ``keys`` the result-cache keys of its runs.
     """
 
@@ -291,6 +307,7 @@ class CalibrationLoop:
         self.verified: list[VerifiedPoint] = []
         self.fits: list[LocalFit] = []
         self.iterations = 0
+        self.basins = BasinSearch(False, "the loop has not run")
         if progress:
             runs.say = self._say
 
@@ -339,6 +356,7 @@ class CalibrationLoop:
             record = self._verify(theta, None)
             if record is not None:
                 self._local(residuals, record)
+        self._search_basins(model, surrogate_trials)
 
     def p_value(self, fit: LocalFit) -> float:
         """F-test of the fit's misfit against the noise (small: systematic)."""
@@ -379,6 +397,183 @@ class CalibrationLoop:
             f"{len(starts)} start(s) along the least determined direction"
         )
         return starts
+
+    # -- other basins (:mod:`._basins`) --------------------------------------------------------
+    def _search_basins(self, model: CurveSurrogate, surrogate_trials: int) -> None:
+        """Where the best verified local optimum's misfit is systematic: other basins from
+        :meth:`_basin_starts`, within ``BASIN_SHARE`` of the budget, until a fit is within
+        the noise — first each start polished on the surrogate and verified (a run a
+        condition group), then, where none of those was better, a short ``least_squares``
+        run of the full solver from each (its own differences). A point better than the
+        best local optimum is fitted to a verified local optimum of its own."""
+        fit = self.best_fit()
+        if fit is None or not self.converged_at_best():
+            self._basins_record(False, "no verified local optimum to start from")
+            return
+        p_value = self.p_value(fit)
+        if p_value >= SIGNIFICANCE:
+            self._basins_record(False, f"the misfit is within the noise (p = {p_value:.2g})")
+            return
+        limit = min(self.budget, self.runs.calls + int(BASIN_SHARE * self.budget))
+        before = self.runs.calls
+        starts = self._basin_starts(fit, model, surrogate_trials)
+        self._say(
+            f"misfit systematic (p = {p_value:.2g}): looking for other basins from "
+            f"{len(starts)} starts, within {limit - before} solver runs"
+        )
+        screened = self._polished(model, starts, limit)
+        if not self._within_noise() and len(self._optima()) == 1:
+            screened += self._screened(starts, limit)
+        self._basins_record(True, f"the misfit was systematic (p = {p_value:.2g})", screened)
+        self.basins = replace(self.basins, solver_calls=self.runs.calls - before)
+
+    def _within_noise(self) -> bool:
+        best = self.best_fit()
+        return best is not None and self.p_value(best) >= SIGNIFICANCE
+
+    def _optima(self) -> list[LocalFit]:
+        return distinct_optima(self.fits)
+
+    def _polished(self, model: CurveSurrogate, starts: list[Start], limit: int) -> int:
+        """Each start polished by L-BFGS-B on the surrogate (refitted on every run so far)
+        and verified, where it lands away from every point verified before; a verified
+        point better than the best local optimum is fitted locally. The starts used."""
+        used = 0
+        for start in starts:
+            if self._within_noise() or not self.verifications_left(limit):
+                break
+            self._fit(model)
+            theta, predicted = self._polish(model, start.theta)
+            unit = self.problem.space.to_unit(theta[None, :])[0]
+            if not far_from(unit, self._verified_units(), SAME_OPTIMUM_UNIT):
+                continue
+            used += 1
+            self._try_basin(theta, predicted, f"{start.why}, polished on the surrogate")
+        return used
+
+    def _screened(self, starts: list[Start], limit: int) -> int:
+        """A short ``least_squares`` run of the full solver from each start (untested, its
+        own differences), within ``limit``; where it ends better than the best local
+        optimum, the local phase from there. The starts used."""
+        residuals = ResidualModel(self.problem, self.runs, budget=limit)
+        used = 0
+        for start in starts:
+            unit = self.problem.space.to_unit(start.theta[None, :])[0]
+            if self._within_noise() or not far_from(unit, self._optima_units()):
+                continue
+            if not self.verifications_left(limit):
+                break
+            used += 1
+            try:
+                end = local_fit(
+                    residuals, start.theta, radius=1.0, max_evaluations=SCREEN_EVALUATIONS
+                )
+            except (SolverFailed, BudgetSpent) as failed:
+                self._say(f"basin start {start.why}: not screened ({failed})")
+                continue
+            self._try_basin(end.theta, None, f"{start.why}, after a short fit", end.curves)
+        return used
+
+    def _try_basin(
+        self,
+        theta: np.ndarray,
+        predicted: float | None,
+        why: str,
+        curves: np.ndarray | None = None,
+    ) -> None:
+        """Verify a point another basin may hold (``curves``: its runs, where done); where it
+        is better than the best local optimum, it is recorded and fitted locally within
+        the calibration's budget."""
+        best = self.best_fit()
+        assert best is not None
+        if curves is None:
+            out = self.runs.run(*self.problem.at_every_group(theta))
+            if any(o is None for o in out):
+                self._say(f"basin start {why}: the solver failed there")
+                return
+            curves = np.array([o.curve for o in out if o is not None])
+        rmse = self.problem.rmse(curves)
+        better = rmse < (1.0 - SETTLED) * best.rmse
+        self._say(
+            f"basin start {why}: RMSE {rmse:.4g} N, {self.runs.calls} solver calls"
+            + ("; better than the best local optimum: fitting it locally" if better else "")
+        )
+        if not better:  # not recorded: the best verified point stays the local optimum
+            return
+        self._verified_locally(
+            theta, curves, self.runs.keys(*self.problem.at_every_group(theta)), "basin"
+        )
+        self._local(ResidualModel(self.problem, self.runs, budget=self.budget), self.verified[-1])
+
+    def _basins_record(self, searched: bool, reason: str, starts: int = 0) -> None:
+        self.basins = BasinSearch(
+            searched, reason, starts, 0, optima_record(self.problem.space, self.fits)
+        )
+
+    def _optima_units(self) -> list[np.ndarray]:
+        return [f.unit for f in self.fits]
+
+    def _verified_units(self) -> list[np.ndarray]:
+        space = self.problem.space
+        return [space.to_unit(v.theta[None, :])[0] for v in self.verified] + self._optima_units()
+
+    def _polish(self, model: CurveSurrogate, theta: np.ndarray) -> tuple[np.ndarray, float]:
+        """L-BFGS-B on the surrogate's predicted RMSE from ``theta``: the point and its
+        predicted RMSE."""
+        space = self.problem.space
+        found = minimize(
+            _with_gradient(self._predicted_rmse(model)),
+            space.to_unit(theta[None, :])[0],
+            jac=True,
+            method="L-BFGS-B",
+            bounds=[(0.0, 1.0)] * len(space),
+            options={"maxiter": 200},
+        )
+        return space.clip(space.from_unit(np.clip(found.x, 0.0, 1.0)[None, :])[0]), float(found.fun)
+
+    def _basin_starts(
+        self, fit: LocalFit, model: CurveSurrogate, surrogate_trials: int
+    ) -> list[Start]:
+        """Where to look for other basins, in this order: both ends of ``BASIN_STEPS`` of a
+        range along the least determined direction; each effect parameter across its
+        range (:func:`~._basins.effect_starts`); the surrogate's best points in other
+        regions (:meth:`_regions`)."""
+        problem = self.problem
+        determination = determination_at(problem, fit)
+        starts = [
+            Start(theta, f"{step:g} of a range along the least determined direction")
+            for step in BASIN_STEPS
+            for theta in along_least_determined(problem, fit, determination, step)
+        ]
+        offs = {p.name: problem.off_value(p.name) for p in problem.space if "." in p.name}
+        starts += effect_starts(problem.space, fit.theta, offs)
+        starts += self._regions(model, surrogate_trials)
+        return starts
+
+    def _regions(self, model: CurveSurrogate, surrogate_trials: int) -> list[Start]:
+        """Up to ``REGIONS`` points of a Sobol batch of the surrogate (refitted on every run
+        so far) of lowest predicted RMSE, each ``REGION_UNIT`` from every local fit's end
+        and from each other."""
+        self._fit(model)
+        space = self.problem.space
+        seed = self.seed * 1000 + 999
+        batch = qmc.Sobol(len(space), scramble=True, seed=seed).random_base2(
+            max(surrogate_trials - 1, 0).bit_length()
+        )
+        objective = self._predicted_rmse(model)
+        values = np.concatenate(
+            [objective(chunk) for chunk in np.split(batch, range(_CHUNK, len(batch), _CHUNK))]
+        )
+        chosen: list[np.ndarray] = []
+        for index in np.argsort(values, kind="stable"):
+            if len(chosen) == REGIONS:
+                break
+            if far_from(batch[index], self._optima_units() + chosen, REGION_UNIT):
+                chosen.append(batch[index])
+        return [
+            Start(space.clip(space.from_unit(u[None, :])[0]), "the surrogate's best elsewhere")
+            for u in chosen
+        ]
 
     def _global(self, model: CurveSurrogate, surrogate_trials: int) -> None:
         """The initial design, then surrogate search and verification until it settles."""
@@ -479,9 +674,12 @@ class CalibrationLoop:
             f"local phase: RMSE {fit.rmse:.4g} N, {self.runs.calls} solver calls; {fit.message}"
         )
 
-    def _verified_locally(self, theta: np.ndarray, curves: np.ndarray, keys: list[str]) -> None:
+    def _verified_locally(
+        self, theta: np.ndarray, curves: np.ndarray, keys: list[str], phase: str = "local"
+    ) -> None:
         """Record a point a local phase's solver runs verified (``keys``: their cache keys):
-        no prediction, the solver runs used so far."""
+        no prediction, the solver runs used so far (``phase``: ``local``, or ``basin`` for a
+        basin start's screen)."""
         self.verified.append(
             VerifiedPoint(
                 theta=theta,
@@ -491,7 +689,7 @@ class CalibrationLoop:
                 keys=keys,
                 curves=curves,
                 calls=self.runs.calls,
-                phase="local",
+                phase=phase,
             )
         )
 
@@ -549,12 +747,8 @@ class CalibrationLoop:
         benchmark names the hidden effect first or tied as often (31 of 32 against 30),
         1.9 × faster (README).
         """
-        problem, space = self.problem, self.problem.space
-
-        def objective(unit: np.ndarray) -> np.ndarray:
-            X = space.from_unit(np.clip(np.atleast_2d(unit), 0.0, 1.0))
-            return problem.batch_rmse(model.predict(X))
-
+        space = self.problem.space
+        objective = self._predicted_rmse(model)
         sobol = qmc.Sobol(len(space), scramble=True, seed=self.seed * 1000 + self.iterations)
         batch = sobol.random_base2(max(n_points - 1, 0).bit_length())  # 2**m ≥ n_points
         values = np.concatenate(  # in chunks: a large surrogate_trials stays in memory
@@ -579,6 +773,16 @@ class CalibrationLoop:
         theta = space.from_unit(np.clip(result_x, 0.0, 1.0)[None, :])[0]
         # exp∘log may round a bound past itself; the verification stays inside
         return space.clip(theta), result_f
+
+    def _predicted_rmse(self, model: CurveSurrogate) -> Callable[[np.ndarray], np.ndarray]:
+        """The surrogate's predicted RMSE at unit points (m, p) or one (p,)."""
+        problem, space = self.problem, self.problem.space
+
+        def objective(unit: np.ndarray) -> np.ndarray:
+            X = space.from_unit(np.clip(np.atleast_2d(unit), 0.0, 1.0))
+            return problem.batch_rmse(model.predict(X))
+
+        return objective
 
 
 def _with_gradient(

@@ -14,6 +14,7 @@ the checks of the commands' options.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -152,6 +153,17 @@ class CalibrationProblem:
         for (effect, param), value in zip(self._slots, values, strict=True):
             (coating if effect is None else effects[effect])[param] = float(value)
         return coating, effects
+
+    def off_value(self, name: str) -> float:
+        """The value of effect parameter ``effect.param`` that switches its effect off
+        (within its range): the effect's ``off``, or for a parameter whose off is NaN (the
+        friction effect's μ) the rig's own value."""
+        effect, param = name.split(".", 1)
+        off = next(p.off for p in get_effect(effect).parameters if p.name == param)
+        if math.isnan(off):
+            off = self.spec.rig.friction
+        spec = self.space[name]
+        return min(max(off, spec.low), spec.high)
 
     # -- a verification: one point at every condition group -------------------------------------
     @property
