@@ -82,16 +82,16 @@ class BasinSearch:
         """What the search found, for the calibration's message ("" where it did not run)."""
         if not self.searched:
             return ""
-        how = f"{self.starts} start(s), {self.solver_calls} solver runs"
+        searched = (
+            "; the first local optimum's misfit was systematic, so other basins were searched "
+            f"({self.starts} start(s), {self.solver_calls} solver runs)"
+        )
         if len(self.optima) < 2:
-            return (
-                f"; other basins searched (systematic misfit; {how}): no other local optimum found"
-            )
+            return f"{searched}: no other local optimum found"
         nxt = self.optima[1]
         return (
-            f"; other basins searched (systematic misfit; {how}): best of {len(self.optima)} "
-            f"local optima, the next is {nxt['rmse_n'] / noise:.3g} × noise"
-            + (f" at {nxt['where']}" if nxt["where"] else "")
+            f"{searched}: best of {len(self.optima)} local optima, the next is "
+            f"{nxt['rmse_n'] / noise:.3g} × noise" + (f" at {nxt['where']}" if nxt["where"] else "")
         )
 
 
