@@ -33,7 +33,7 @@ from ..study._spec import StudySpec
 from ._determination import at_bound_text, interval_text, parameter_interval_text
 from ._fidelity import LOW_FIDELITY_BUDGET, CorrectedCalibration, CorrectedRuns, CurveCorrection
 from ._local import LocalFit, bound_sides
-from ._loop import CalibrationLoop, SolverRuns, VerifiedPoint, determination_at
+from ._loop import SETTLED, CalibrationLoop, SolverRuns, VerifiedPoint, determination_at
 from ._problem import (
     CalibrationProblem,
     calibration_study_name,
@@ -44,6 +44,8 @@ from ._statistics import SIGNIFICANCE
 
 __all__ = [
     "CalibrationResult",
+    "beaten_by",
+    "beaten_text",
     "calibrate",
     "calibration_note",
     "data_hash",
@@ -201,6 +203,7 @@ def run_calibration(
     correction: CurveCorrection | None = None,
     expensive: bool = True,
     certify: bool = True,
+    start: Mapping[str, float] | None = None,
 ) -> tuple[CalibrationResult, CalibrationLoop]:
     """:func:`calibrate`, and the loop it ran (the diagnosis reads its correction).
 
@@ -209,7 +212,9 @@ def run_calibration(
     (built-in runs, nothing verified by the expensive solver: the diagnosis's
     recalibrations of candidates, never recorded); without ``certify`` a local optimum
     the corrected model's first-order test passed is not tested again by the expensive
-    solver (the diagnosis's calibrations, whose runs name the effect).
+    solver (the diagnosis's calibrations, whose runs name the effect); ``start`` (a study
+    with the built-in solver only): the local phase begins there, no global phase (the
+    diagnosis's recalibration of the model in a better basin it found).
     """
     check_jobs(jobs)
     check_budget(max_solver_calls)  # bad options fail before anything is read or written
@@ -256,7 +261,12 @@ def run_calibration(
         # a diagnosis's recalibration with a candidate's extra parameters: its initial
         # design and one verification, as the model it is ranked against had
         loop.budget = smallest
-    loop.run(spec.budget.surrogate_trials)
+    if start is None:
+        loop.run(spec.budget.surrogate_trials)
+    elif type(loop) is CalibrationLoop:
+        loop.run(spec.budget.surrogate_trials, np.array([start[n] for n in problem.space.names]))
+    else:
+        raise ValueError("a calibration from a start point needs the built-in solver's loop")
     result = _result(loop, chosen, url)
     if record and expensive:
         _record(result.storage, name, problem, loop.verified, result, data_hash(spec))
@@ -525,6 +535,42 @@ def _record(
     study.set_user_attr("result", json.loads(json.dumps(result.to_json())))
     study.set_user_attr("data_sha256", data_sha)
     _note(study, calibration_note(result.to_json()))
+
+
+def beaten_by(
+    storage: str | optuna.storages.BaseStorage, name: str, result: Mapping[str, Any]
+) -> dict[str, Any] | None:
+    """The best verified point of the calibration study ``name`` on the same data, where it
+    fits better than the recorded ``result`` by more than ``SETTLED`` of its RMSE (another
+    basin the recorded calibration did not reach: an earlier run's, with another seed or
+    budget): ``{trial, rmse_n, params}``; else None."""
+    if isinstance(storage, str):
+        storage = open_storage(storage)
+    try:
+        study = optuna.load_study(study_name=name, storage=storage)
+    except KeyError:
+        return None
+    data = study.user_attrs.get("data_sha256")
+    trials = [
+        t
+        for t in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
+        if t.value is not None and t.user_attrs.get("data_sha256") == data
+    ]
+    values = [float(t.value) for t in trials if t.value is not None]
+    if not values or min(values) >= (1.0 - SETTLED) * result["rmse_n"]:
+        return None
+    best = trials[int(np.argmin(values))]
+    return {"trial": best.number, "rmse_n": min(values), "params": dict(best.params)}
+
+
+def beaten_text(model: str, beaten: Mapping[str, Any], noise: float) -> str:
+    """The one line that says another basin beats a recorded calibration."""
+    values = ", ".join(f"{k}={v:.4g}" for k, v in beaten["params"].items())
+    return (
+        f"another basin beats this calibration of {model}: verified point #{beaten['trial']} "
+        f"of its study fits to {beaten['rmse_n']:.4g} N ({beaten['rmse_n'] / noise:.3g} × "
+        f"noise) at {values}"
+    )
 
 
 def calibration_note(result: Mapping[str, Any]) -> list[str]:

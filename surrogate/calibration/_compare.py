@@ -37,7 +37,7 @@ from ..storage._storage import (
     open_storage,
     refuse_in_memory,
 )
-from ._calibrate import calibration_note
+from ._calibrate import beaten_by, beaten_text, calibration_note
 from ._loop import SolverRuns
 from ._problem import CalibrationProblem, calibration_study_name, load_calibration, model_label
 from ._statistics import column_values
@@ -68,8 +68,10 @@ class CompareResult:
     condition or covariate that varies between tests, the correlation of the
     tests' mean residual with it; ``plots``: the PNG files written.
     ``calibration``: for the stored calibration (no ``params`` given), its
-    ``status``, ``misfit`` and ``determination`` (see :class:`CalibrationResult`);
-    ``None`` for given parameters.
+    ``status``, ``misfit`` and ``determination`` (see :class:`CalibrationResult`), and
+    ``beaten_by``: a verified point of the same model and data in its study that fits
+    better (another basin, e.g. an earlier run's: ``{trial, rmse_n, params}``; None where
+    none does — the message then says so in one line); ``None`` for given parameters.
     """
 
     params: dict[str, float]
@@ -189,6 +191,7 @@ def comparison(
         refuse_in_memory(url, "`compare` without --params")
     name = calibration_study_name(spec, chosen)
     stored = None if params is not None else latest_calibration(url, name)
+    beaten = None if stored is None else beaten_by(url, name, stored)
     theta = _parameters(problem, params if stored is None else stored["params"], url, name)
     curves = _model_curves(problem, theta, solve=solve)
     residual = problem.residuals(curves)
@@ -205,9 +208,10 @@ def comparison(
         bands=bands,
         covariates=_covariate_correlations(problem, tests),
         plots=[],
-        calibration=_claims(stored),
+        calibration=None if stored is None else {**_claims(stored), "beaten_by": beaten},
         study=name,
-        message=_message(chosen, rmse, noise, tests, bands, stored),
+        message=_message(chosen, rmse, noise, tests, bands, stored)
+        + ("" if beaten is None else "; " + beaten_text(model_label(chosen), beaten, noise)),
     )
     return Comparison(problem, curves, residual, stored, url, result)
 
@@ -268,10 +272,8 @@ def _message(
     )
 
 
-def _claims(stored: Mapping[str, Any] | None) -> dict[str, Any] | None:
-    """What the stored calibration claims (``None`` for given parameters)."""
-    if stored is None:
-        return None
+def _claims(stored: Mapping[str, Any]) -> dict[str, Any]:
+    """What the stored calibration claims."""
     return {k: stored.get(k) for k in ("status", "misfit", "misfit_p_value", "determination")}
 
 

@@ -225,7 +225,12 @@ class CorrectedCalibration(CalibrationLoop):
         return len(self.low_used)
 
     # -- the loop ------------------------------------------------------------------------------
-    def run(self, surrogate_trials: int) -> None:
+    def run(self, surrogate_trials: int, start: np.ndarray | None = None) -> None:
+        if start is not None:
+            raise ValueError("the corrected loop begins at the corrected model's optimum")
+        self._run(surrogate_trials)
+
+    def _run(self, surrogate_trials: int) -> None:
         start = self._corrected_optimum(surrogate_trials)
         if start is None:
             return

@@ -339,17 +339,22 @@ class CalibrationLoop:
         multi-fidelity loop's corrected-model test and the expensive local phase's)."""
         return min(self.fits, key=lambda f: (f.rmse, not f.converged)) if self.fits else None
 
-    def run(self, surrogate_trials: int) -> None:
+    def run(self, surrogate_trials: int, start: np.ndarray | None = None) -> None:
+        """The loop; ``start``: a point to begin the local phase from instead of the global
+        phase (verified first; a diagnosis that found a better basin of the model)."""
         model = CurveSurrogate(self.problem.features, len(self.problem.groups), seed=self.seed)
-        self._global(model, surrogate_trials)
-        start = self.best()
+        if start is None:
+            self._global(model, surrogate_trials)
+            first = self.best()
+        else:
+            first = self._verify(self.problem.space.clip(start), None)
         residuals = ResidualModel(self.problem, self.runs, budget=self.budget)
         for check in range(BASIN_CHECKS):
-            if start is None:
+            if first is None:
                 break
-            self._local(residuals, start)
+            self._local(residuals, first)
             # a better point found on the last pass would be left unfitted: none is sought
-            start = self._other_basin(model, surrogate_trials) if check + 1 < BASIN_CHECKS else None
+            first = self._other_basin(model, surrogate_trials) if check + 1 < BASIN_CHECKS else None
         for theta in self._valley_starts():
             if not self.verifications_left():
                 break
