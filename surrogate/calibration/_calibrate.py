@@ -315,7 +315,7 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
         storage=url,
         message="",
     )
-    message = _message(problem, result, fit) + loop.basins.sentence(loop.noise)
+    message = _message(problem, result, fit, loop.basins.sentence(loop.noise))
     retried, sentence = _retried(loop, best)
     message += sentence
     multi = _multi_fidelity(loop, best)
@@ -418,11 +418,14 @@ def _message(
     problem: CalibrationProblem,
     result: CalibrationResult,
     fit: LocalFit | None,
+    basins: str = "",
 ) -> str:
     """The calibration's one message. Unconverged: the local fit's reason, and "raise
     --budget" only where the budget is what stopped it (``budget_exhausted``); a fit
     that stopped with runs left (``stalled``: four rounds whose test found nothing
-    better) says that more runs would not have been spent there."""
+    better) says that more runs would not have been spent there. ``basins``: what the
+    search of other basins found (:meth:`~._basins.BasinSearch.sentence`), after the
+    status."""
     rmse, noise = result.rmse_n, result.noise_n
     text = (
         f"{model_label(result.effects)}: RMSE {rmse:.4g} N over {problem.n_points} points of "
@@ -436,7 +439,7 @@ def _message(
             if result.status == "budget_exhausted"
             else "the budget was not the limit: a larger one would not have been spent"
         )
-        text = f"{text} ({why}; best verified point so far — {hint})"
+        text = f"{text} ({why}; best verified point so far — {hint}){basins}"
         text += _at_bounds(problem, result.params)
         if result.misfit is None:
             return text
@@ -448,7 +451,7 @@ def _message(
     assert result.determination is not None
     held = [n for n in result.determination["held_at_bound"] if n in problem.spec.space.names]
     return (
-        f"{text} ({fit.message if fit else ''}); {result.misfit} (F-test p = "
+        f"{text} ({fit.message if fit else ''}){basins}; {result.misfit} (F-test p = "
         f"{result.misfit_p_value:.2g}); {result.determination['statement']}"
         + (f" — {_widen(len(held))}" if held else "")
     )
