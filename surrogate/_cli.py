@@ -864,11 +864,25 @@ _COMMANDS: tuple[tuple[Callable[[_Subparsers], argparse.ArgumentParser], _Handle
 """(declare the arguments, handle the command) per command, in the order of ``--help``."""
 
 
+def _package_version() -> str:
+    """The installed distribution's version, else (a source tree not installed)
+    ``surrogate.__version__``."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("webbing-surrogate")
+    except PackageNotFoundError:
+        from . import __version__
+
+        return __version__
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = _OneLineParser(
         prog="surrogate",
         description="Identify the coating of seat-belt webbing from 2-point bending tests.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_package_version()}")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_OneLineParser)
     for add, handler in _COMMANDS:
         add(commands).set_defaults(handler=handler)

@@ -154,8 +154,8 @@ class MeasurementFormat:
         The product's column name (``angle_deg``, ``force_n``, ``test_id``, a
         condition or a covariate such as ``temperature_c``) → the file's header for
         it, e.g. ``{"force_n": "Force [mN]"}``. Given, a measurement file's other
-        columns are not read (a tester's time or travel channel), besides those
-        already named as the product names them.
+        columns are read only if named in the product's style (lower case, such as
+        ``temperature_c``): a tester's ``Time [s]`` channel is not.
     conditions : Path or None
         A table of each test's conditions, keyed by ``test_id`` or by ``file`` (the
         file name of a one-test file).

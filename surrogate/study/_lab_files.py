@@ -6,10 +6,11 @@ file that exists is never read as a glob). Each file is read the same way:
 
 1. its text, in ``encoding`` (a UTF-8 byte-order mark is skipped);
 2. its delimiter and decimal mark: stated, or detected (:mod:`._formats`);
-3. the product's column names: ``columns`` renames the file's headers (and then only
-   the columns it names, and those already named as the product names them, are
-   read); a ``force_<unit>`` / ``angle_<unit>`` column such as ``force_mn`` is the
-   force / angle column;
+3. the product's column names: ``columns`` renames the file's headers, and then
+   only the columns it names and those already named in the product's style (a
+   lower-case name such as ``tension_n`` or ``temperature_c``) are read, not a
+   tester's ``Time [s]`` channel; a ``force_<unit>`` / ``angle_<unit>`` column such
+   as ``force_mn`` is the force / angle column;
 4. numbers: a missing, NaN, inf or non-numeric value is an error naming the file,
    the column and the line;
 5. N and degrees (:mod:`._units`): each column in ``force_unit`` / ``angle_unit`` if
@@ -46,12 +47,13 @@ import pandas as pd
 
 from .._errors import InputDataError, InputDataWarning
 from ._conditions import CONDITIONS, NUMERIC_CONDITIONS, check_conditions
-from ._formats import COLUMN_NAMES, MeasurementFormat, detect_decimal, detect_delimiter
+from ._formats import MeasurementFormat, detect_decimal, detect_delimiter
 from ._units import to_degrees, to_newtons, unit_in_name
 
 __all__ = ["SourceTable", "measurement_sources", "numbers", "read_sources", "sources_sha256"]
 
 _MAGIC = re.compile(r"[*?[]")
+_PRODUCT_NAME = re.compile(r"[a-z][a-z0-9_]*")  # test_id, tension_n, temperature_c
 _QUANTITIES = (("force", "force_n", "N"), ("angle", "angle_deg", "deg"))
 _ONE_TURN_DEG = 360.0
 _FEW_DEG = 2.0 * np.pi  # a curve ending here in "degrees" is likely in radians
@@ -240,8 +242,10 @@ def _read_file(path: Path, file_format: MeasurementFormat, used: set[str]) -> So
     numeric += [h for h in split.header if h in ("angle_deg", "force_n", *NUMERIC_CONDITIONS)]
     decimal = split.decimal(numeric, file_format, where)
     frame = split.frame(text, decimal, "measurement file", where).rename(columns=renames)
-    if file_format.columns:
-        frame = frame[[c for c in frame.columns if c in renames.values() or c in COLUMN_NAMES]]
+    if file_format.columns:  # a lab's own channels (``Time [s]``) are not read
+        frame = frame[
+            [c for c in frame.columns if c in renames.values() or _PRODUCT_NAME.fullmatch(c)]
+        ]
     units = {}
     for quantity, name, default in _QUANTITIES:
         if name not in frame:
