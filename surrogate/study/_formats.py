@@ -7,8 +7,8 @@ read. The rules, each in one function here:
 
 - **delimiter** (:func:`detect_delimiter`): of ``,``, ``;`` and tab, the one that
   splits the header and every non-empty line into the same number (≥ 2) of fields;
-  if several do, the one whose data fields are numbers most often; still a tie, or
-  none: an error asking for ``delimiter``.
+  if several do, the one that makes the largest share of the data fields numbers;
+  still a tie, or none: an error asking for ``delimiter``.
 - **decimal mark** (:func:`detect_decimal`): ``.`` in a comma-delimited file (a file
   cannot use ``,`` for both); otherwise ``,`` if the numeric columns hold numbers
   such as ``0,123`` and none such as ``0.123``, ``.`` in the reverse case or with
@@ -277,17 +277,17 @@ def _first_ragged(rows: dict[str, list[tuple[int, list[str]]]]) -> str:
     )
 
 
-def _numeric_fields(rows: list[list[str]], delimiter: str) -> int:
-    """How many fields are numbers (with either decimal mark, but not a comma in a
-    comma-delimited file)."""
+def _numeric_fields(rows: list[list[str]], delimiter: str) -> float:
+    """The fraction of fields that are numbers (with either decimal mark, but not a comma
+    in a comma-delimited file)."""
     marks = (".",) if delimiter == "," else DECIMALS
-    return sum(
+    values = [value.strip() for row in rows for value in row]
+    numeric = sum(
         1
-        for row in rows
-        for value in row
-        if _WHOLE.fullmatch(value.strip())
-        or any(_NUMBER[mark].fullmatch(value.strip()) for mark in marks)
+        for value in values
+        if _WHOLE.fullmatch(value) or any(_NUMBER[mark].fullmatch(value) for mark in marks)
     )
+    return numeric / max(len(values), 1)
 
 
 def detect_decimal(values: Iterable[str], delimiter: str, where: str) -> str:

@@ -121,9 +121,9 @@ def sources_sha256(file: Path, file_format: MeasurementFormat) -> str:
 def numbers(values: pd.Series, name: str, where: str, *, decimal: str = ".") -> np.ndarray:
     """A column as floats; a missing, NaN, inf or non-numeric value is an InputDataError
     naming ``where``, the column and the line (header on line 1)."""
-    if values.dtype == object and decimal == ",":
-        values = values.str.replace(",", ".", regex=False)
-    found = pd.to_numeric(values, errors="coerce").to_numpy(float)
+    text = decimal == "," and not pd.api.types.is_numeric_dtype(values)
+    marked = values.str.replace(",", ".", regex=False) if text else values
+    found = pd.to_numeric(marked, errors="coerce").to_numpy(float)
     bad = ~np.isfinite(found)
     if bad.any():
         row = int(np.argmax(bad))
@@ -139,7 +139,7 @@ def numbers(values: pd.Series, name: str, where: str, *, decimal: str = ".") -> 
 def _measurement_files(file: Path, file_format: MeasurementFormat) -> tuple[Path, ...]:
     """``file`` itself, or the files its glob matches (sorted, the conditions table left
     out); a glob that matches nothing is an InputDataError."""
-    folder, rest = file, []
+    folder, rest = file, list[str]()
     while not folder.exists() and folder != folder.parent:
         rest.insert(0, folder.name)
         folder = folder.parent
@@ -328,7 +328,7 @@ def _with_test(
             f"{where}: {twice[0]} is both a column of the file and a field of [measurements] "
             "name_pattern; keep one"
         )
-    _check_fields(fields, where)
+    _check_fields(fields, f"{where} (by its name)")
     if "test_id" not in frame.columns:
         _check_one_curve(frame, where)
         frame.insert(0, "test_id", str(fields.pop("test_id", path.stem)))
@@ -339,7 +339,7 @@ def _check_fields(fields: dict[str, object], where: str) -> None:
     try:
         check_conditions({k: v for k, v in fields.items() if k in CONDITIONS})
     except InputDataError as error:
-        raise InputDataError(f"{where} (its name_pattern fields): {error}") from None
+        raise InputDataError(f"{where}: {error}") from None
 
 
 def _check_one_curve(frame: pd.DataFrame, where: str) -> None:

@@ -15,6 +15,8 @@ import math
 import re
 from typing import TypeVar
 
+import numpy as np
+
 from .._errors import InputDataError
 
 __all__ = [
@@ -47,7 +49,7 @@ FORCE_UNITS = {
 ANGLE_UNITS = {"deg": 1.0, "rad": 180.0 / math.pi}
 """Degrees per unit of each angle unit a measurement file may use."""
 
-Values = TypeVar("Values")  # a float or a NumPy array of them
+Values = TypeVar("Values", float, np.ndarray)  # a value or an array of them
 
 _UNITS = {"force": FORCE_UNITS, "angle": ANGLE_UNITS}
 _ALIASES = {"°": "deg"}  # "Angle [°]", as testers' software writes it
@@ -73,12 +75,12 @@ def check_unit(key: str, unit: object, quantity: str) -> str:
 
 def to_newtons(force: Values, unit: str) -> Values:
     """Forces in ``unit`` (a key of :data:`FORCE_UNITS`) → N."""
-    return force * FORCE_UNITS[unit]  # type: ignore[operator]
+    return force * FORCE_UNITS[unit]
 
 
 def to_degrees(angle: Values, unit: str) -> Values:
     """Angles in ``unit`` (a key of :data:`ANGLE_UNITS`) → degrees."""
-    return angle * ANGLE_UNITS[unit]  # type: ignore[operator]
+    return angle * ANGLE_UNITS[unit]
 
 
 def unit_in_name(column: str, quantity: str) -> str | None:
