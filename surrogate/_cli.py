@@ -13,14 +13,16 @@ Progress of long runs goes through :mod:`logging` (see :mod:`surrogate._log`).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import signal
 import sys
-from collections.abc import Callable, Sequence
+import warnings
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from ._errors import InputDataError, Interrupted, SolverError
+from ._errors import InputDataError, InputDataWarning, Interrupted, SolverError
 from ._io import atomic_write_text
 from ._log import show_progress
 from .solvers import available_solvers
@@ -895,7 +897,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     show_progress()
     try:
-        return int(args.handler(args))
+        with _data_warnings_in_one_line():
+            return int(args.handler(args))
     except InputDataError as error:
         _fail(f"error: {error}", EXIT_USAGE)
     except Interrupted as error:  # 143 or 130, as a shell reports a process the signal killed
@@ -917,6 +920,23 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         _fail(f"error: {message}", EXIT_USAGE)
     return 0
+
+
+@contextlib.contextmanager
+def _data_warnings_in_one_line() -> Iterator[None]:
+    """An :class:`InputDataWarning` as ``surrogate: warning: …`` on stderr (Python's
+    default adds the source line); other warnings as Python shows them."""
+    shown = warnings.showwarning
+
+    def show(message: Warning | str, category: type[Warning], *args: Any, **kwargs: Any) -> None:
+        if issubclass(category, InputDataWarning):
+            print(f"surrogate: warning: {message}", file=sys.stderr)
+        else:
+            shown(message, category, *args, **kwargs)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield
 
 
 def _fail(message: str, code: int) -> NoReturn:

@@ -43,6 +43,7 @@ __all__ = [
     "DELIMITERS",
     "MeasurementFormat",
     "NamePattern",
+    "check_delimiter",
     "detect_decimal",
     "detect_delimiter",
 ]
@@ -254,6 +255,18 @@ def detect_delimiter(lines: list[str], where: str) -> str:
     return best[0]
 
 
+def check_delimiter(lines: list[str], delimiter: str, where: str) -> str:
+    """A stated ``delimiter``, if it splits the header and every line into the same number
+    (≥ 2) of fields; else an InputDataError saying where it does not."""
+    rows = {delimiter: _records(lines, delimiter)}
+    if not _splits_evenly(rows[delimiter]):
+        raise InputDataError(
+            f"{where}: [measurements] delimiter = {delimiter!r} does not split it into columns"
+            f"{_first_ragged(rows)}; check the key (or leave it out: it is detected)"
+        )
+    return delimiter
+
+
 def _records(lines: list[str], delimiter: str) -> list[tuple[int, list[str]]]:
     """(line number, fields) of each non-empty line."""
     return [(n, r) for n, r in enumerate(csv.reader(lines, delimiter=delimiter), 1) if r]
@@ -267,10 +280,12 @@ def _first_ragged(rows: dict[str, list[tuple[int, list[str]]]]) -> str:
     """Where the delimiter that splits the header most stops fitting (for the error)."""
     delimiter = max(rows, key=lambda d: len(rows[d][0][1]) if rows[d] else 0)
     found = rows[delimiter]
-    if not found or len(found[0][1]) < 2:
+    if not found:
         return ""
+    if len(found[0][1]) < 2:
+        return f" (split at each {DELIMITERS[delimiter]}, the header is one column)"
     width = len(found[0][1])
-    line, fields = next((n, r) for n, r in found if len(r) != width)
+    line, fields = next(((n, r) for n, r in found if len(r) != width), found[0])
     return (
         f" (split at each {DELIMITERS[delimiter]}, the header has {width} columns, "
         f"line {line} has {len(fields)})"

@@ -47,7 +47,7 @@ import pandas as pd
 
 from .._errors import InputDataError, InputDataWarning
 from ._conditions import CONDITIONS, NUMERIC_CONDITIONS, check_conditions
-from ._formats import MeasurementFormat, detect_decimal, detect_delimiter
+from ._formats import MeasurementFormat, check_delimiter, detect_decimal, detect_delimiter
 from ._units import to_degrees, to_newtons, unit_in_name
 
 __all__ = ["SourceTable", "measurement_sources", "numbers", "read_sources", "sources_sha256"]
@@ -195,7 +195,10 @@ class _Split:
     @classmethod
     def of(cls, text: str, file_format: MeasurementFormat, where: str) -> _Split:
         lines = text.splitlines()
-        delimiter = file_format.delimiter or detect_delimiter(lines, where)
+        if file_format.delimiter is None:
+            delimiter = detect_delimiter(lines, where)
+        else:
+            delimiter = check_delimiter(lines, file_format.delimiter, where)
         records = [r for r in csv.reader(lines, delimiter=delimiter) if r]
         header = tuple(name.strip() for name in records[0])
         twice = sorted({name for name in header if header.count(name) > 1})
@@ -216,7 +219,9 @@ class _Split:
     ) -> pd.DataFrame:
         """The table, with the stripped header."""
         try:
-            frame = pd.read_csv(io.StringIO(text), sep=self.delimiter, decimal=decimal, **options)
+            frame = pd.read_csv(
+                io.StringIO(text), sep=self.delimiter, decimal=decimal, index_col=False, **options
+            )
         except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError) as error:
             first = str(error).strip().splitlines()[0] if str(error).strip() else "unreadable"
             raise InputDataError(f"{what} {where} is not a readable CSV ({first})") from None
@@ -226,6 +231,8 @@ class _Split:
                 "header); check [measurements] delimiter"
             )
         frame.columns = list(self.header)
+        empty = [c for c in frame.columns if c == "" and frame[c].isna().all()]
+        frame = frame.drop(columns=empty)  # a delimiter at each line's end
         if frame.empty:
             raise InputDataError(f"{where}: no rows")
         return frame

@@ -148,6 +148,18 @@ def test_a_byte_order_mark_and_a_windows_encoding(tmp_path):
     pd.testing.assert_frame_equal(data.curves, bom.curves)
 
 
+def test_a_stated_delimiter_is_checked_and_a_trailing_one_is_no_column(tmp_path):
+    text = _rows(";", ",", header=("test_id", "angle_deg", "force_n"), lead=("T1",))
+    trailing = text.replace("\n", ";\n")
+    data = _load(tmp_path, 'file = "t.csv"\ndelimiter = ";"\ndecimal = ","\n', {"t.csv": trailing})
+    assert list(data.curves.columns) == ["test_id", "angle_deg", "force_n"]
+    message = _refused(tmp_path, 'file = "t.csv"\ndelimiter = "\\t"\n', {"t.csv": text})
+    assert (
+        "delimiter = '\\t' does not split it into columns (split at each tab, the header is "
+        "one column); check the key (or leave it out: it is detected)"
+    ) in message
+
+
 def test_a_testers_channels_are_not_read_once_columns_are_named(tmp_path):
     lines = ["Zeit [s];Weg [mm];Winkel [°];Kraft [N];temperature_c"] + [
         f"{a / 90:g};{a / 10:g};{a};{str(f).replace('.', ',')};21,5" for a, f in CURVE
