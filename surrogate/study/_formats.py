@@ -243,6 +243,8 @@ def detect_delimiter(lines: list[str], where: str) -> str:
             "file cannot use ',' both between columns and as decimal mark); set [measurements] "
             'delimiter (and decimal), e.g. delimiter = ";"'
         )
+    if len(even) == 1:
+        return even[0]
     scores = {d: _numeric_fields([r for _, r in rows[d][1:]], d) for d in even}
     best = [d for d in even if scores[d] == max(scores.values())]
     if len(best) > 1:

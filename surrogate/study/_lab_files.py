@@ -263,6 +263,8 @@ def _read_file(path: Path, file_format: MeasurementFormat, used: set[str]) -> So
         convert = to_newtons if quantity == "force" else to_degrees
         frame[name] = convert(numbers(frame[name], label, where, decimal=decimal), unit)
         units[quantity] = unit
+    for name in (n for n in NUMERIC_CONDITIONS if n in frame):
+        frame[name] = numbers(frame[name], name, where, decimal=decimal)
     frame = _with_test(frame, path, file_format, where)
     return SourceTable(path, frame, units.get("force", "N"), units.get("angle", "deg"))
 

@@ -300,6 +300,14 @@ def test_bad_files_are_refused_with_one_line(tmp_path):
             {"t.csv": semicolon.replace("2,5", "2,5 N")},
             "t.csv: column force_n has a missing, NaN, inf or non-numeric value (2,5 N) at line 4",
         ),
+        "text in a condition": (
+            'file = "t.csv"\n',
+            {
+                "t.csv": "test_id;angle_deg;force_n;tension_n\n"
+                + "".join(f"T1;{a};0,5;{'12,5 N' if a == 20 else '12,5'}\n" for a in (0, 10, 20))
+            },
+            "column tension_n has a missing, NaN, inf or non-numeric value (12,5 N) at line 4",
+        ),
         "NaN force": (
             'file = "t.csv"\n',
             {"t.csv": semicolon.replace("2,5", "NaN")},
