@@ -37,7 +37,6 @@ import glob
 import hashlib
 import io
 import re
-import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,12 +44,18 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .._errors import InputDataError, InputDataWarning
+from .._errors import InputDataError
 from ._conditions import CONDITIONS, NUMERIC_CONDITIONS, check_conditions
 from ._formats import MeasurementFormat, check_delimiter, detect_decimal, detect_delimiter
 from ._units import to_degrees, to_newtons, unit_in_name
 
-__all__ = ["SourceTable", "measurement_sources", "numbers", "read_sources", "sources_sha256"]
+__all__ = [
+    "SourceTable",
+    "measurement_sources",
+    "numbers",
+    "read_sources",
+    "sources_sha256",
+]
 
 _MAGIC = re.compile(r"[*?[]")
 _PRODUCT_NAME = re.compile(r"[a-z][a-z0-9_]*")  # test_id, tension_n, temperature_c
@@ -81,22 +86,25 @@ class SourceTable:
     angle_unit: str
 
 
-def read_sources(file: Path, file_format: MeasurementFormat) -> list[SourceTable]:
-    """Every measurement file of ``file`` (a path or a glob), read (the module's steps)."""
+def read_sources(file: Path, file_format: MeasurementFormat) -> tuple[list[SourceTable], list[str]]:
+    """Every measurement file of ``file`` (a path or a glob), read (the module's steps),
+    and the warnings about them, one line each, for the caller to give once the data is
+    known to be valid."""
     used: set[str] = set()
     sources = [
         _read_file(path, file_format, used) for path in _measurement_files(file, file_format)
     ]
+    notes: list[str] = []
     if file_format.conditions is not None:
-        sources = _join_conditions(sources, file_format, used)
+        sources, notes = _join_conditions(sources, file_format, used)
     unused = [name for name, header in file_format.columns.items() if header not in used]
     if unused:
         raise InputDataError(
             f"[measurements] columns.{unused[0]} = {file_format.columns[unused[0]]!r} matches "
             "no column of the measurement files or the conditions table; fix the header"
         )
-    _check_scales(sources, file)
-    return sources
+    _check_scales(sources)
+    return sources, [*notes, *_odd_scales(sources, file)]
 
 
 def measurement_sources(file: Path, file_format: MeasurementFormat) -> tuple[Path, ...]:
@@ -367,9 +375,9 @@ def _check_one_curve(frame: pd.DataFrame, where: str) -> None:
 # -- the conditions table --------------------------------------------------------------------
 def _join_conditions(
     sources: list[SourceTable], file_format: MeasurementFormat, used: set[str]
-) -> list[SourceTable]:
-    """Each source with its tests' rows of the conditions table; a test without a row is
-    an InputDataError, a row without a test a warning."""
+) -> tuple[list[SourceTable], list[str]]:
+    """Each source with its tests' rows of the conditions table, and the warning of rows
+    without a test, if any; a test without a row is an InputDataError."""
     assert file_format.conditions is not None
     key, table = _conditions_table(file_format.conditions, file_format, used)
     where_table = str(file_format.conditions)
@@ -393,14 +401,12 @@ def _join_conditions(
         joined.append(dataclasses.replace(source, table=source.table.assign(**extra)))
         matched.update(ids)
     unmatched = [i for i in rows.index if i not in matched]
-    if unmatched:
-        warnings.warn(
-            f"{where_table}: {len(unmatched)} row(s) match no measurement file (the first: "
-            f"{key} = {unmatched[0]!r}); they are not read",
-            InputDataWarning,
-            stacklevel=4,
-        )
-    return joined
+    if not unmatched:
+        return joined, []
+    return joined, [
+        f"{where_table}: {len(unmatched)} row(s) match no measurement file (the first: "
+        f"{key} = {unmatched[0]!r}); they are not read"
+    ]
 
 
 def _keys(source: SourceTable, key: str) -> pd.Series:
@@ -443,9 +449,8 @@ def _conditions_table(
 
 
 # -- plausibility of the units ---------------------------------------------------------------
-def _check_scales(sources: list[SourceTable], file: Path) -> None:
-    """Angles beyond a turn are an error; a curve of a few "degrees" or of thousands of
-    "N" a warning (the unit is likely radians or mN)."""
+def _check_scales(sources: list[SourceTable]) -> None:
+    """Angles beyond a turn of the fixture are an error (the unit is likely wrong)."""
     for source in sources:
         if "angle_deg" not in source.table:
             continue
@@ -456,19 +461,24 @@ def _check_scales(sources: list[SourceTable], file: Path) -> None:
                 f"{source.path}: the angles reach {top:g}°{unit}, more than a turn of the "
                 "fixture; check the angle column and [measurements] angle_unit"
             )
-    in_deg = [s for s in sources if s.angle_unit == "deg" and "angle_deg" in s.table]
-    if in_deg and (top := max(float(s.table.angle_deg.max()) for s in in_deg)) <= _FEW_DEG:
-        warnings.warn(
-            f"{file}: the angles end at {top:g}°: if they are radians, set "
-            '[measurements] angle_unit = "rad"',
-            InputDataWarning,
-            stacklevel=4,
-        )
-    in_n = [s for s in sources if s.force_unit == "N" and "force_n" in s.table]
-    if in_n and (top := max(float(s.table.force_n.max()) for s in in_n)) > _MANY_N:
-        warnings.warn(
-            f"{file}: the forces reach {top:g} N, far above a bending test's few N: if they "
-            'are mN, set [measurements] force_unit = "mN"',
-            InputDataWarning,
-            stacklevel=4,
-        )
+
+
+def _odd_scales(sources: list[SourceTable], file: Path) -> list[str]:
+    """Warnings of curves that end at a few "degrees" or reach thousands of "N" (the unit
+    is likely radians or mN)."""
+    notes = []
+    in_deg = [s.table.angle_deg.max() for s in sources if "angle_deg" in s.table]
+    if in_deg and all(s.angle_unit == "deg" for s in sources):
+        if (top := float(max(in_deg))) <= _FEW_DEG:
+            notes.append(
+                f"{file}: the angles end at {top:g}°: if they are radians, set "
+                '[measurements] angle_unit = "rad"'
+            )
+    in_n = [s.table.force_n.max() for s in sources if "force_n" in s.table]
+    if in_n and all(s.force_unit == "N" for s in sources):
+        if (top := float(max(in_n))) > _MANY_N:
+            notes.append(
+                f"{file}: the forces reach {top:g} N, far above a bending test's few N: if "
+                'they are mN, set [measurements] force_unit = "mN"'
+            )
+    return notes

@@ -14,6 +14,7 @@ radians, one file per test with its conditions in a table or in its name):
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,7 +22,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .._errors import InputDataError
+from .._errors import InputDataError, InputDataWarning
 from ._conditions import CONDITIONS, DIRECTIONS, NUMERIC_CONDITIONS
 from ._formats import MeasurementFormat
 from ._lab_files import SourceTable, numbers, read_sources
@@ -91,14 +92,18 @@ def load_measurements(
         name says otherwise (:mod:`._lab_files`).
     """
     path = Path(path)
-    sources = read_sources(path, file_format or MeasurementFormat())
+    sources, notes = read_sources(path, file_format or MeasurementFormat())
     if len(sources) == 1:
-        return measurements_from(sources[0].table, where=str(path))
-    for source in sources:  # each file's errors name that file
-        _check_values(source.table, str(source.path))
-    _check_alike(sources)
-    table = pd.concat([s.table for s in sources], ignore_index=True)
-    return measurements_from(table, where=str(path))
+        data = measurements_from(sources[0].table, where=str(path))
+    else:
+        for source in sources:  # each file's errors name that file
+            _check_values(source.table, str(source.path))
+        _check_alike(sources)
+        table = pd.concat([s.table for s in sources], ignore_index=True)
+        data = measurements_from(table, where=str(path))
+    for note in notes:  # odd but valid data
+        warnings.warn(note, InputDataWarning, stacklevel=2)
+    return data
 
 
 def _check_values(table: pd.DataFrame, where: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
