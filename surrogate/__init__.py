@@ -13,7 +13,7 @@ The packages, top down (a package imports from its own row or the rows below)::
       → physics/ (the rod, the coating section, curve features)
 """
 
-from ._errors import InputDataError, Interrupted, SolverError, SurrogateError
+from ._errors import InputDataError, InputDataWarning, Interrupted, SolverError, SurrogateError
 from ._lazy import lazy_attributes
 from .physics import CurveFeatures, curve_features
 from .solvers._simulate import BendingCurve, simulate
@@ -69,6 +69,7 @@ __all__ = [
     "ExportResult",
     "FitResult",
     "InputDataError",
+    "InputDataWarning",
     "Interrupted",
     "ModelState",
     "ParameterSpace",

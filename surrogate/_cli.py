@@ -13,14 +13,16 @@ Progress of long runs goes through :mod:`logging` (see :mod:`surrogate._log`).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import signal
 import sys
-from collections.abc import Callable, Sequence
+import warnings
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from ._errors import InputDataError, Interrupted, SolverError
+from ._errors import InputDataError, InputDataWarning, Interrupted, SolverError
 from ._io import atomic_write_text
 from ._log import show_progress
 from .solvers import available_solvers
@@ -864,11 +866,25 @@ _COMMANDS: tuple[tuple[Callable[[_Subparsers], argparse.ArgumentParser], _Handle
 """(declare the arguments, handle the command) per command, in the order of ``--help``."""
 
 
+def _package_version() -> str:
+    """The installed distribution's version, else (a source tree not installed)
+    ``surrogate.__version__``."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("webbing-surrogate")
+    except PackageNotFoundError:
+        from . import __version__
+
+        return __version__
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = _OneLineParser(
         prog="surrogate",
         description="Identify the coating of seat-belt webbing from 2-point bending tests.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_package_version()}")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_OneLineParser)
     for add, handler in _COMMANDS:
         add(commands).set_defaults(handler=handler)
@@ -881,7 +897,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     show_progress()
     try:
-        return int(args.handler(args))
+        with _data_warnings_in_one_line():
+            return int(args.handler(args))
     except InputDataError as error:
         _fail(f"error: {error}", EXIT_USAGE)
     except Interrupted as error:  # 143 or 130, as a shell reports a process the signal killed
@@ -903,6 +920,23 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         _fail(f"error: {message}", EXIT_USAGE)
     return 0
+
+
+@contextlib.contextmanager
+def _data_warnings_in_one_line() -> Iterator[None]:
+    """An :class:`InputDataWarning` as ``surrogate: warning: …`` on stderr (Python's
+    default adds the source line); other warnings as Python shows them."""
+    shown = warnings.showwarning
+
+    def show(message: Warning | str, category: type[Warning], *args: Any, **kwargs: Any) -> None:
+        if issubclass(category, InputDataWarning):
+            print(f"surrogate: warning: {message}", file=sys.stderr)
+        else:
+            shown(message, category, *args, **kwargs)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield
 
 
 def _fail(message: str, code: int) -> NoReturn:

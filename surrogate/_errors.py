@@ -6,7 +6,7 @@ that knows nothing of this package still handles them (BoTorch's habit).
 
 from __future__ import annotations
 
-__all__ = ["InputDataError", "Interrupted", "SolverError", "SurrogateError"]
+__all__ = ["InputDataError", "InputDataWarning", "Interrupted", "SolverError", "SurrogateError"]
 
 
 class SurrogateError(Exception):
@@ -18,6 +18,11 @@ class InputDataError(SurrogateError, ValueError):
 
     The message is one line: what is wrong, the value seen, and how to fix it.
     """
+
+
+class InputDataWarning(UserWarning):
+    """User-supplied data is odd but usable (e.g. forces of thousands of N in a file
+    stated in N); the message is one line saying what looks wrong and the fix."""
 
 
 class SolverError(SurrogateError, RuntimeError):

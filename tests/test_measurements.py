@@ -105,3 +105,18 @@ def test_a_test_at_a_longer_bending_length_brings_its_strip_length(tmp_path):
     table.to_csv(tmp_path / "m.csv", index=False)
     data = load_measurements(tmp_path / "m.csv")
     assert "free_length_mm" in data.conditions and "free_length_mm" not in data.covariates
+
+
+def test_a_long_csv_reads_as_it_always_did(tmp_path):
+    """Before lab formats, a file was ``pd.read_csv`` then ``measurements_from``: the same set,
+    exactly, for the shipped file and this module's files."""
+    from surrogate.study._measurements import measurements_from
+    from tests.conftest import REPO
+
+    _table(noise=0.05).to_csv(tmp_path / "m.csv", index=False)
+    for path in (REPO / "data" / "measurements" / "webbing_tests.csv", tmp_path / "m.csv"):
+        before, now = measurements_from(pd.read_csv(path), where=str(path)), load_measurements(path)
+        pd.testing.assert_frame_equal(now.curves, before.curves, check_exact=True)
+        pd.testing.assert_frame_equal(now.tests, before.tests, check_exact=True)
+        assert (now.conditions, now.covariates) == (before.conditions, before.covariates)
+        assert (now.noise_n, now.noise_dof) == (before.noise_n, before.noise_dof)

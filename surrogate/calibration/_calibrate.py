@@ -28,6 +28,7 @@ from .._validate import check_budget
 from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import distributions, quiet_optuna
 from ..storage._storage import check_storage_url, open_storage
+from ..study._lab_files import sources_sha256
 from ..study._space import ParameterSpace
 from ..study._spec import StudySpec
 from ._determination import at_bound_text, interval_text, parameter_interval_text
@@ -491,9 +492,10 @@ def _widen(count: int) -> str:
 
 
 def data_hash(spec: StudySpec) -> str:
-    """SHA-256 of the measurement file's bytes (which data a calibration saw)."""
+    """SHA-256 of the measurements' bytes (which data a calibration saw; one file's is
+    its bytes')."""
     assert spec.measurements_file is not None
-    return hashlib.sha256(Path(spec.measurements_file).read_bytes()).hexdigest()
+    return sources_sha256(spec.measurements_file, spec.measurement_format)
 
 
 # -- the record in the Optuna storage -----------------------------------------------------------

@@ -272,7 +272,7 @@ def load_calibration(
         raise InputDataError(
             f"study {spec.name!r} has no [measurements] file; add one to calibrate against curves"
         )
-    data = load_measurements(spec.measurements_file)
+    data = load_measurements(spec.measurements_file, file_format=spec.measurement_format)
     chosen = tuple(spec.effects) if effects is None else check_effects(effects)
     noise = spec.noise_n if spec.noise_n is not None else data.noise_n
     if noise is None:

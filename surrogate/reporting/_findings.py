@@ -209,7 +209,7 @@ def _measurements(spec: StudySpec, missing: dict[str, str]) -> MeasurementSet | 
     if spec.measurements_file is None:
         return None
     try:
-        return load_measurements(spec.measurements_file)
+        return load_measurements(spec.measurements_file, file_format=spec.measurement_format)
     except InputDataError as error:
         missing["measurements"] = f"The measured curves cannot be read: {error}."
         return None

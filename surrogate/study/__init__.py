@@ -6,8 +6,11 @@
 - ``_rig``: the test rig (``Rig``); ``_conditions``: a test's conditions and
   the rig they make;
 - ``_measurements``: measured curves (``MeasurementSet``, ``load_measurements``);
+  ``_formats`` and ``_lab_files``: files as labs export them (``MeasurementFormat``,
+  the ``[measurements]`` keys);
 - ``_samples``: solver runs of a design (``SampleSet``);
-- ``_units``: GPa at the interfaces, MPa inside.
+- ``_units``: GPa at the interfaces, MPa inside; measured forces and angles into N
+  and degrees.
 
 The study file's ``[solver]`` section is checked against the solver registry
 (:mod:`surrogate.solvers`), which itself reads rigs and spaces from here; so
@@ -22,6 +25,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from ._conditions import CONDITIONS, DIRECTIONS, check_conditions, rig_for
+from ._formats import MeasurementFormat
 from ._rig import Rig
 from ._space import COATING_PARAMETERS, DESIGNS, PAPER_SPACE, ParameterSpace, ParameterSpec
 from ._units import MPA_PER_GPA, gpa_to_mpa, mpa_to_gpa
@@ -37,6 +41,7 @@ __all__ = [
     "DIRECTIONS",
     "MPA_PER_GPA",
     "PAPER_SPACE",
+    "MeasurementFormat",
     "MeasurementSet",
     "ParameterSpace",
     "ParameterSpec",

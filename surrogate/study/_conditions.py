@@ -15,7 +15,14 @@ from .._errors import InputDataError
 from .._validate import check_positive, check_range
 from ._rig import Rig
 
-__all__ = ["CONDITIONS", "DIRECTIONS", "RIG_CONDITIONS", "check_conditions", "rig_for"]
+__all__ = [
+    "CONDITIONS",
+    "DIRECTIONS",
+    "NUMERIC_CONDITIONS",
+    "RIG_CONDITIONS",
+    "check_conditions",
+    "rig_for",
+]
 
 CONDITIONS = (
     "tension_n",
@@ -26,6 +33,8 @@ CONDITIONS = (
     "width_mm",
 )
 DIRECTIONS = ("warp", "weft")
+NUMERIC_CONDITIONS = tuple(name for name in CONDITIONS if name != "direction")
+"""The conditions that are numbers (each in the unit its name says)."""
 RIG_CONDITIONS = ("tension_n", "bending_length_mm", "free_length_mm", "width_mm")
 """The conditions that are fields of the test's rig (the same names)."""
 

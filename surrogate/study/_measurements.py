@@ -6,10 +6,15 @@ other column is kept as a covariate for the diagnosis. Conditions and
 covariates are constant within a test. Tests with the same conditions are
 replicates (a covariate such as the lab temperature may differ between them):
 their scatter estimates the measurement noise.
+
+The files may come as labs export them (another delimiter, a decimal comma, mN or
+radians, one file per test with its conditions in a table or in its name):
+:mod:`._lab_files` reads them into this format, N and degrees.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,8 +22,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .._errors import InputDataError
-from ._conditions import CONDITIONS, DIRECTIONS
+from .._errors import InputDataError, InputDataWarning
+from ._conditions import CONDITIONS, DIRECTIONS, NUMERIC_CONDITIONS
+from ._formats import MeasurementFormat
+from ._lab_files import SourceTable, numbers, read_sources
 
 __all__ = ["MeasurementSet", "load_measurements"]
 
@@ -70,35 +77,41 @@ class MeasurementSet:
         }
 
 
-def load_measurements(path: str | Path) -> MeasurementSet:
-    """Read and validate a measurement file; a bad one raises InputDataError (one line)."""
+def load_measurements(
+    path: str | Path, *, file_format: MeasurementFormat | None = None
+) -> MeasurementSet:
+    """Read and validate a study's measurements; a bad file raises InputDataError (one line).
+
+    Parameters
+    ----------
+    path : str or Path
+        A measurement file, or a glob of them (``tests/*.csv``).
+    file_format : MeasurementFormat, optional
+        How the files are read (the ``[measurements]`` keys); default: delimiter and
+        decimal mark detected, forces in N and angles in degrees unless a column's
+        name says otherwise (:mod:`._lab_files`).
+    """
     path = Path(path)
-    if not path.exists():
-        raise InputDataError(f"measurement file {path} does not exist; check the path")
-    try:
-        table = pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
-        first = str(error).strip().splitlines()[0] if str(error).strip() else "unreadable"
-        raise InputDataError(f"measurement file {path} is not a readable CSV ({first})") from None
-    return measurements_from(table, where=str(path))
+    sources, notes = read_sources(path, file_format or MeasurementFormat())
+    if len(sources) == 1:
+        data = measurements_from(sources[0].table, where=str(path))
+    else:
+        for source in sources:  # each file's errors name that file
+            _check_values(source.table, str(source.path))
+        _check_alike(sources)
+        table = pd.concat([s.table for s in sources], ignore_index=True)
+        data = measurements_from(table, where=str(path))
+    for note in notes:  # odd but valid data
+        warnings.warn(note, InputDataWarning, stacklevel=2)
+    return data
 
 
-def measurements_from(table: pd.DataFrame, *, where: str = "measurements") -> MeasurementSet:
+def _check_values(table: pd.DataFrame, where: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """Check a long table (its numeric columns made floats in place); its conditions and
+    covariates."""
     _check_columns(table, where)
-    for name in (
-        "angle_deg",
-        "force_n",
-        *[c for c in CONDITIONS if c in table and c != "direction"],
-    ):
-        values = pd.to_numeric(table[name], errors="coerce").to_numpy(float)
-        bad = ~np.isfinite(values)
-        if bad.any():
-            line = int(np.argmax(bad)) + 2
-            raise InputDataError(
-                f"{where}: column {name} has a missing, NaN, inf or "
-                f"non-numeric value at line {line}; fix or remove the row"
-            )
-        table[name] = values
+    for name in ("angle_deg", "force_n", *[c for c in NUMERIC_CONDITIONS if c in table]):
+        table[name] = numbers(table[name], name, where)
     if (table.force_n < 0).any():
         line = int(np.argmax((table.force_n < 0).to_numpy())) + 2
         raise InputDataError(
@@ -112,6 +125,32 @@ def measurements_from(table: pd.DataFrame, *, where: str = "measurements") -> Me
     conditions = tuple(c for c in CONDITIONS if c in table)
     covariates = tuple(c for c in table.columns if c not in (*REQUIRED, *conditions))
     _check_tests(table, conditions + covariates, where)
+    return conditions, covariates
+
+
+def _check_alike(sources: list[SourceTable]) -> None:
+    """Files of one study: the same columns, and each test in one file only."""
+    first = sources[0]
+    seen = {t: first.path for t in first.table.test_id.unique()}
+    for source in sources[1:]:
+        if set(source.table.columns) != set(first.table.columns):
+            differ = sorted(set(source.table.columns) ^ set(first.table.columns))
+            raise InputDataError(
+                f"{source.path}: its columns differ from those of {first.path} ({differ[0]} is "
+                "in one only); give every file the same columns"
+            )
+        for test_id in source.table.test_id.unique():
+            if test_id in seen:
+                raise InputDataError(
+                    f"{source.path}: test {test_id!r} is also in {seen[test_id]}; give each test "
+                    "its own test_id"
+                )
+            seen[test_id] = source.path
+
+
+def measurements_from(table: pd.DataFrame, *, where: str = "measurements") -> MeasurementSet:
+    """The validated set of a long table (``where`` names it in errors)."""
+    conditions, covariates = _check_values(table, where)
     tests = table.groupby("test_id", sort=False).first().reset_index()
     tests = tests[["test_id", *conditions, *covariates]]
     return MeasurementSet(
@@ -135,7 +174,8 @@ def _check_columns(table: pd.DataFrame, where: str) -> None:
     if missing:
         raise InputDataError(
             f"{where}: missing column(s) {', '.join(missing)}; the format is "
-            "test_id, angle_deg, force_n[, conditions…]"
+            "test_id, angle_deg, force_n[, conditions…] (its columns: "
+            f"{', '.join(map(str, table.columns))}): name yours with [measurements] columns"
         )
 
 
@@ -158,8 +198,9 @@ def _check_tests(table: pd.DataFrame, constant: tuple[str, ...], where: str) -> 
         for column in constant:
             if rows[column].nunique(dropna=False) > 1:
                 raise InputDataError(
-                    f"{where}: {column} changes within test {test_id!r}; a "
-                    "test has one value of each condition"
+                    f"{where}: {column} changes within test {test_id!r}; a test has one "
+                    "value of each condition and covariate (a channel such as time is not "
+                    "one: read only your columns with [measurements] columns)"
                 )
 
 

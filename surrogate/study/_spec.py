@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from .._errors import InputDataError
+from ._formats import MeasurementFormat
 from ._rig import Rig
 from ._space import COATING_PARAMETERS, PAPER_SPACE, ParameterSpace, ParameterSpec
 
@@ -93,6 +94,7 @@ class StudySpec:
     targets: Targets = field(default_factory=Targets)
     measurements_file: Path | None = None
     noise_n: float | None = None
+    measurement_format: MeasurementFormat = field(default_factory=MeasurementFormat)
     constraints: Constraints = field(default_factory=Constraints)
     preference_order: tuple[str, ...] = ("tcoat_mm", "scoat_gpa")
     effects: tuple[str, ...] = ()
@@ -140,8 +142,8 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
     kind, solver_settings, multi_fidelity = _solver(_section(data, "solver", where), where, path)
     rig = _rig(_section(data, "rig", where), where)
     space = _space(_section(data, "parameters", where), where)
-    targets, measurements = _targets(data, where, path)
-    noise = _section(data, "measurements", where).get("noise_n")
+    targets = _targets(data, where)
+    measurements, noise, file_format = _measurements(data, where, path)
     constraints = _constraints(_section(data, "constraints", where), where)
     order = _preferences(_section(data, "preferences", where), space, where)
     effects = _effects(_section(data, "model", where), where)
@@ -161,7 +163,8 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
         space=space,
         targets=targets,
         measurements_file=measurements,
-        noise_n=None if noise is None else _positive(noise, where, "measurements.noise_n"),
+        noise_n=noise,
+        measurement_format=file_format,
         constraints=constraints,
         preference_order=order,
         effects=effects,
@@ -334,7 +337,7 @@ def _space(section: dict[str, Any], where: str) -> ParameterSpace:
     return ParameterSpace(tuple(specs))
 
 
-def _targets(data: dict[str, Any], where: str, path: Path | None) -> tuple[Targets, Path | None]:
+def _targets(data: dict[str, Any], where: str) -> Targets:
     section = _section(data, "targets", where)
     _only(section, ("f60_n", "tolerance", "measurements"), where, "targets")
     f60 = section.get("f60_n")
@@ -344,20 +347,53 @@ def _targets(data: dict[str, Any], where: str, path: Path | None) -> tuple[Targe
         raise InputDataError(
             f"{where}: targets.tolerance is relative and must be < 1, got {tolerance:g}"
         )
-    measurements = _section(data, "measurements", where)
-    _only(measurements, ("file", "noise_n"), where, "measurements")
-    file = measurements.get("file", section.get("measurements"))
-    resolved = None
-    if file is not None:
-        if not isinstance(file, str):
-            raise InputDataError(f"{where}: measurements file must be a path string, got {file!r}")
-        base = path.parent if path is not None else Path.cwd()
-        resolved = (base / file).resolve()
-        if not resolved.is_relative_to(base.resolve().parent):
-            raise InputDataError(
-                f"{where}: measurements file {file!r} leaves the project folder; keep data under it"
-            )
-    return Targets(f60, tolerance), resolved
+    return Targets(f60, tolerance)
+
+
+_FORMAT_KEYS = tuple(f for f in MeasurementFormat.__dataclass_fields__ if f != "conditions")
+
+
+def _measurements(
+    data: dict[str, Any], where: str, path: Path | None
+) -> tuple[Path | None, float | None, MeasurementFormat]:
+    """``[measurements]``: the file (or glob), ``noise_n`` and how the files are read
+    (:class:`MeasurementFormat`; relative paths are relative to the study file)."""
+    section = _section(data, "measurements", where)
+    _only(section, ("file", "noise_n", "conditions", *_FORMAT_KEYS), where, "measurements")
+    file = section.get("file", _section(data, "targets", where).get("measurements"))
+    noise = section.get("noise_n")
+    noise = None if noise is None else _positive(noise, where, "measurements.noise_n")
+    resolved = None if file is None else _project_path(file, where, "measurements file", path)
+    given = [key for key in section if key not in ("file", "noise_n")]
+    if given and resolved is None:
+        raise InputDataError(
+            f'{where}: [measurements] {given[0]} is set but no file; add file = "tests/*.csv"'
+        )
+    conditions = section.get("conditions")
+    try:
+        file_format = MeasurementFormat(
+            **{key: section[key] for key in _FORMAT_KEYS if key in section},
+            conditions=None
+            if conditions is None
+            else _project_path(conditions, where, "measurements conditions", path),
+        )
+    except InputDataError as error:
+        raise InputDataError(f"{where}: [measurements] {error}") from None
+    return resolved, noise, file_format
+
+
+def _project_path(value: Any, where: str, key: str, path: Path | None) -> Path:
+    """A path string of the study file, resolved; refused if it leaves the project folder
+    (the study file's folder's parent)."""
+    if not isinstance(value, str):
+        raise InputDataError(f"{where}: {key} must be a path string, got {value!r}")
+    base = path.parent if path is not None else Path.cwd()
+    resolved = (base / value).resolve()
+    if not resolved.is_relative_to(base.resolve().parent):
+        raise InputDataError(
+            f"{where}: {key} {value!r} leaves the project folder; keep data under it"
+        )
+    return resolved
 
 
 def _constraints(section: dict[str, Any], where: str) -> Constraints:

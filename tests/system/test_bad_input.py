@@ -20,6 +20,7 @@ from surrogate.identify._doe import make_design
 from surrogate.identify._verify import enqueue, open_verify_study
 from surrogate.identify._worker import work
 from surrogate.study._spec import load_study
+from tests.lab_files import BAD_LAB_FILES
 from tests.workers.fixed_cost import FixedCostSolve
 
 REPO = Path(__file__).resolve().parents[2]
@@ -240,6 +241,8 @@ CASES = [
         {"hard.toml": STUDY + HARDENING},
         ["doe", "--study", "hard.toml", "--run", "--n", "2", "--out", "x.csv"],
     ),
+    # measurement files as labs export them, that cannot be read (tests/lab_files.py)
+    *[(f"lab-{name}", files, ["calibrate", "lab.toml"]) for name, files, _ in BAD_LAB_FILES],
 ]
 
 # what the one line must say, where a case's message was once a bare OS error or a
@@ -265,6 +268,7 @@ SAYS = {
     "calibrate-storage-folder-missing": "does not exist; create it first",
     "compare-storage-unknown-scheme": "unknown scheme 'foo'",
     "compare-nothing-calibrated": "run `surrogate calibrate` first or give --params",
+    **{f"lab-{name}": says for name, _, says in BAD_LAB_FILES},
 }
 
 
@@ -303,6 +307,7 @@ def test_bad_input_is_one_line_exit_2_and_nothing_changes(
     shutil.copytree(project, folder)
     for name, text in files.items():
         path = folder / name
+        path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(text if isinstance(text, bytes) else text.encode())
     monkeypatch.chdir(folder)
     before = _hashes(folder)
