@@ -295,7 +295,10 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
     if fit is not None and converged:
         p_value = loop.p_value(fit)
         misfit = "within the noise" if p_value >= SIGNIFICANCE else "systematic"
-        determination = determination_at(problem, fit).to_json()
+        found = (
+            loop.determination if loop.determination is not None else determination_at(problem, fit)
+        )
+        determination = found.to_json()
     elif (at_best := loop.p_value_at(best)) >= SIGNIFICANCE:  # an optimum fits as well
         p_value, misfit = at_best, "within the noise"
     spent = loop.budget_spent()

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-__all__ = ["Determination", "determine"]
+__all__ = ["Determination", "checked", "determine", "interval_kind_of", "linear_entries"]
 
 LEVEL = 0.95
 FREE_SHARE = 0.25  # a 95 % interval this wide a share of the range: the linearisation is not
@@ -85,6 +85,7 @@ class Determination:
     held_at_bound: list[str]
     directions: list[dict[str, Any]]
     statement: str
+    profile_solver_calls: int | None = None
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -299,21 +300,69 @@ def _combination(
 
 
 def parameter_interval_text(name: str, determination: Mapping[str, Any]) -> str:
-    """A parameter's 95 % interval as the note and the report show it."""
-    interval = determination["intervals"].get(name)
-    if interval is None:
-        return "held at a bound of its range"
-    free = " (free within its range)" if name in determination["free"] else ""
-    return f"{interval[0]:.4g} – {interval[1]:.4g}{free}"
+    """A parameter's 95 % interval as the note, the CLI and the report show it."""
+    return interval_text(determination["intervals"][name])
 
 
-def interval_text(combination: Mapping[str, Any]) -> str:
-    """A combination's 95 % interval as the note and the report show it."""
-    if combination.get("held_by_bounds"):
-        return "held by the ranges (its parameters at bounds)"
-    if combination["low"] is None:
-        return "not determined"
-    return f"{combination['low']:.4g} – {combination['high']:.4g}"
+def interval_text(entry: Mapping[str, Any]) -> str:
+    """A 95 % interval (a combination's or a parameter's checked entry) as the note, the
+    CLI and the report show it: both ends, one bound, or free; and how it was found."""
+    low, high, kind = entry["low"], entry["high"], entry["kind"]
+    how = {"profile": "profile", "linear": "linear, checked", "unchecked": "linear, not checked"}
+    tail = f" ({how[entry['method']]})"
+    if kind == "two-sided":
+        return f"{low:.4g} – {high:.4g}{tail}"
+    reason = f"; {entry['reason']}" if entry.get("reason") else ""
+    if kind == "lower-bound":
+        return f"≥ {low:.4g}, a lower bound only{reason}{tail}"
+    if kind == "upper-bound":
+        return f"≤ {high:.4g}, an upper bound only{reason}{tail}"
+    return f"free within its range{reason}{tail}"
+
+
+def linear_entries(
+    linear: Determination,
+    names: Sequence[str],
+    theta: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+) -> dict[str, dict[str, Any]]:
+    """The linear intervals as :func:`checked`'s entries, ``method`` ``unchecked``: an end
+    clipped at its range's end is open, a free or held parameter has none."""
+    entries: dict[str, dict[str, Any]] = {}
+    for key, c in linear.combinations.items():
+        entries[key] = {
+            "value": c["value"],
+            "low": c["low"],
+            "high": c["high"],
+            "kind": interval_kind_of(c["low"] is not None, c["high"] is not None),
+            "method": "unchecked",
+        }
+    for k, name in enumerate(names):
+        interval = linear.intervals.get(name)
+        ends = [None, None] if interval is None or name in linear.free else list(interval)
+        if ends[0] is not None and ends[0] <= low[k] * (1 + 1e-9):
+            ends[0] = None
+        if ends[1] is not None and ends[1] >= high[k] * (1 - 1e-9):
+            ends[1] = None
+        entries[name] = {
+            "value": float(theta[k]),
+            "low": ends[0],
+            "high": ends[1],
+            "kind": interval_kind_of(ends[0] is not None, ends[1] is not None),
+            "method": "unchecked",
+        }
+    return entries
+
+
+def interval_kind_of(has_low: bool, has_high: bool) -> str:
+    """What an interval with these ends bounds: ``two-sided``, ``lower-bound`` (only its
+    low end is the data's), ``upper-bound`` or ``free``."""
+    if has_low and has_high:
+        return "two-sided"
+    if has_low:
+        return "lower-bound"
+    return "upper-bound" if has_high else "free"
 
 
 def _statement(
@@ -348,3 +397,131 @@ def _statement(
     if effect_parts:
         text += "; " + ", ".join(effect_parts)
     return text
+
+
+# -- the record with every interval checked (profiles, :mod:`._profile`) ------------------------
+def checked(
+    linear: Determination,
+    names: Sequence[str],
+    theta: np.ndarray,
+    entries: Mapping[str, Mapping[str, Any]],
+    labels: Mapping[str, str],
+    *,
+    solver_calls: int,
+) -> Determination:
+    """The determination with every interval a checked claim: ``entries`` maps each
+    combination and parameter to ``{value, low, high, kind, method}`` (``low``/``high``
+    None on an open side; optionally ``reason``: why a side is open, e.g. "the curves
+    show no plateau before 90°"), from the profiles; ``labels`` the combinations' labels.
+    ``directions`` and ``sigma_n`` stay the linearisation's; ``free`` lists the parameters
+    of kind ``free``; ``profile_solver_calls`` the runs the profiles cost."""
+    combinations = {
+        key: _with_width(dict(entries[key]), linear.combinations[key].get("held_by_bounds"))
+        for key in linear.combinations
+    }
+    intervals = {name: dict(entries[name]) for name in names}
+    free = [name for name in names if intervals[name]["kind"] == "free"]
+    statement = _checked_statement(names, theta, combinations, intervals, labels, linear)
+    return Determination(
+        sigma_n=linear.sigma_n,
+        dof=linear.dof,
+        combinations=combinations,
+        intervals=intervals,  # type: ignore[arg-type]
+        free=free,
+        held_at_bound=linear.held_at_bound,
+        directions=linear.directions,
+        statement=statement,
+        profile_solver_calls=solver_calls,
+    )
+
+
+def _with_width(entry: dict[str, Any], held_by_bounds: Any) -> dict[str, Any]:
+    """A combination's entry with ``relative_half_width`` (the larger side's, two-sided
+    only) and ``held_by_bounds`` (False where the profile bounds it from either side)."""
+    value, low, high = entry["value"], entry["low"], entry["high"]
+    width = None
+    if low is not None and high is not None:
+        width = max(value / low - 1.0, high / value - 1.0)
+    bounded = low is not None or high is not None
+    return {
+        **entry,
+        "relative_half_width": width,
+        "held_by_bounds": bool(held_by_bounds) and not bounded,
+    }
+
+
+def _percent(value: float) -> str:
+    return f"{100 * value:.2g} %"
+
+
+def _combination_phrase(label: str, entry: Mapping[str, Any]) -> str:
+    """How the statement says what the curves determine of a combination."""
+    value, low, high, kind = entry["value"], entry["low"], entry["high"], entry["kind"]
+    short = label.split(" ", 1)[0]  # "D", "Mp"
+    reason = f" ({entry['reason']})" if entry.get("reason") else ""
+    if kind == "two-sided":
+        below, above = 1.0 - low / value, high / value - 1.0
+        if max(below, above) <= 1.25 * min(below, above):
+            return f"{label} to ±{_percent(max(below, above))}"
+        return f"{label} to −{_percent(below)}/+{_percent(above)}"
+    if kind == "lower-bound":
+        return f"{short} ≥ {low:.4g} only{reason}"
+    if kind == "upper-bound":
+        return f"{short} ≤ {high:.4g} only{reason}"
+    return f"no bound on {short} within the ranges{reason}"
+
+
+def _parameter_phrase(name: str, entry: Mapping[str, Any]) -> str:
+    label = _LABELS.get(name, name)
+    low, high, kind = entry["low"], entry["high"], entry["kind"]
+    if kind == "two-sided":
+        return f"{label} {entry['value']:.3g} [{low:.3g}, {high:.3g}]"
+    if kind == "lower-bound":
+        return f"{label} ≥ {low:.3g}"
+    return f"{label} ≤ {high:.3g}"
+
+
+def _checked_statement(
+    names: Sequence[str],
+    theta: np.ndarray,
+    combinations: Mapping[str, Mapping[str, Any]],
+    intervals: Mapping[str, Mapping[str, Any]],
+    labels: Mapping[str, str],
+    linear: Determination,
+) -> str:
+    """The one sentence of what the curves determine (every interval checked)."""
+    parts = [_combination_phrase(labels[key], c) for key, c in combinations.items()]
+    method = (
+        "profile"
+        if any(e["method"] == "profile" for e in (*combinations.values(), *intervals.values()))
+        else "linear, checked"
+    )
+    text = "the curves determine " + (" and ".join(parts) if parts else "no named combination")
+    text += f" ({100 * LEVEL:g} %, {method})"
+    free = [n for n in names if intervals[n]["kind"] == "free"]
+    if free:
+        label = ", ".join(_LABELS.get(n, n) for n in free)
+        text += f"; {label} apart {'are' if len(free) > 1 else 'is'} free within the ranges"
+    bounded = [
+        _parameter_phrase(n, intervals[n])
+        for n in names
+        if intervals[n]["kind"] != "free" and ("." in n or intervals[n]["kind"] != "two-sided")
+    ]
+    coating_two_sided = [
+        _parameter_phrase(n, intervals[n])
+        for n in names
+        if "." not in n and intervals[n]["kind"] == "two-sided"
+    ]
+    if coating_two_sided + bounded:
+        text += "; " + ", ".join(coating_two_sided + bounded)
+    for name in linear.held_at_bound:
+        k = list(names).index(name)
+        text += "; " + at_bound_text(name, int(_held_side(intervals[name], theta[k])), theta[k])
+    if any(c["method"] == "unchecked" for c in (*combinations.values(), *intervals.values())):
+        text += "; some ends were not checked (the profiles' budget was spent): linear there"
+    return text
+
+
+def _held_side(entry: Mapping[str, Any], value: float) -> int:
+    """The side of its range a held parameter is at: −1 lower (its low side open)."""
+    return -1 if entry["low"] is None else 1

@@ -49,6 +49,7 @@ __all__ = [
     "LocalFit",
     "ResidualModel",
     "SolverFailed",
+    "broyden_update",
     "gauss_newton_step",
     "local_fit",
     "optimum_test",
@@ -322,6 +323,12 @@ class ResidualModel:
         return np.frombuffer(min(done)[1]).copy() if done else None
 
 
+def broyden_update(jac: np.ndarray, step: np.ndarray, change: np.ndarray) -> np.ndarray:
+    """Broyden's rank-one update of a Jacobian (n, p) by a step (p,) and the residual's
+    change along it (n,): the nearest Jacobian that maps the step to the change."""
+    return jac + np.outer(change - jac @ step, step) / (step @ step)
+
+
 class _BroydenJacobian:
     """``jac`` for ``least_squares``: finite differences every ``refresh``-th call,
     Broyden's rank-one update of the last Jacobian in between."""
@@ -338,8 +345,7 @@ class _BroydenJacobian:
             jac = self.model.jacobian(unit)
         else:
             _, previous_residual, previous_jac = self._last
-            change = residual - previous_residual
-            jac = previous_jac + np.outer(change - previous_jac @ step, step) / (step @ step)
+            jac = broyden_update(previous_jac, step, residual - previous_residual)
         self.calls += 1
         self._last = (unit.copy(), residual, jac)
         return jac

@@ -37,6 +37,7 @@ from scipy.stats import qmc
 
 from .._pool import imap_unordered
 from ..gp import CurveSurrogate
+from ..physics import curve_features
 from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..solvers._fidelity import LOW_FIDELITY
@@ -51,16 +52,18 @@ from ._basins import (
     far_from,
     optima_record,
 )
-from ._determination import determine
+from ._determination import Determination, checked, determine, linear_entries
 from ._local import (
     FIRST_ORDER_BOX,
     BudgetSpent,
+    FitCoordinates,
     LocalFit,
     ResidualModel,
     SolverFailed,
     local_fit,
 )
 from ._problem import CalibrationProblem, coat_section
+from ._profile import Profile, Quantity, profile
 from ._statistics import SIGNIFICANCE, misfit_p_value, noise_dof
 
 __all__ = [
@@ -88,6 +91,8 @@ VALLEY_STEP = 0.25  # the valley starts: a quarter of a range along the least de
 BASIN_STEPS = (0.25, 0.5)
 REGIONS = 2  # the surrogate's best points in other regions, at most
 REGION_UNIT = 0.2  # …each this far from every optimum found and from each other
+PROFILE_SHARE = 1.0  # the profiles' runs: at most this share of the calibration's again
+PROFILE_ROUNDS = 2  # profiles at most: a second where the first found a better point
 
 _LOG = logging.getLogger(__name__)
 
@@ -246,8 +251,8 @@ def determination_at(problem: CalibrationProblem, fit: LocalFit) -> Any:
         fit.residual,
         fit.at_bound,
         combinations={
-            "bending_stiffness_nmm": ("D ∝ Ecoat·Tcoat", stiffness),
-            "plastic_moment_n": ("Mp ∝ Scoat·Tcoat", moment),
+            "bending_stiffness_nmm": (_LABELS["bending_stiffness_nmm"], stiffness),
+            "plastic_moment_n": (_LABELS["plastic_moment_n"], moment),
         },
     )
 
@@ -268,6 +273,62 @@ def along_least_determined(
     units = [np.clip(fit.unit + sign * move, 0.0, 1.0) for sign in signs]
     units = [u for u in units if np.max(np.abs(u - fit.unit)) > FIRST_ORDER_BOX]
     return [problem.space.clip(problem.space.from_unit(u[None, :])[0]) for u in units]
+
+
+_LABELS = {"bending_stiffness_nmm": "D ∝ Ecoat·Tcoat", "plastic_moment_n": "Mp ∝ Scoat·Tcoat"}
+
+
+def profiled_quantities(problem: CalibrationProblem) -> list[Quantity]:
+    """What the profiles bound: D and Mp per unit width (where the space holds the
+    coating; their ranges over the box, :class:`~._local.FitCoordinates`), then every
+    parameter in the space's order."""
+    space, thickness = problem.space, problem.spec.rig.thickness_mm
+    names = space.names
+    found: list[Quantity] = []
+    coordinates = FitCoordinates(space, thickness)
+    if coordinates.coating:
+        for key, index, (low, high) in (
+            ("bending_stiffness_nmm", 0, coordinates.log_d),
+            ("plastic_moment_n", 1, coordinates.log_m),
+        ):
+
+            def section(theta: np.ndarray, index: int = index) -> float:
+                return coat_section(dict(zip(names, map(float, theta), strict=True)), thickness)[
+                    index
+                ]
+
+            found.append(Quantity(key, section, True, float(np.exp(low)), float(np.exp(high))))
+    for k, spec in enumerate(space):
+
+        def parameter(theta: np.ndarray, k: int = k) -> float:
+            return float(theta[k])
+
+        found.append(Quantity(spec.name, parameter, spec.log, spec.low, spec.high))
+    return found
+
+
+def _linear_ends(determination: Any, name: str) -> tuple[float | None, float | None]:
+    """The linear interval's ends of a combination or parameter (None: none, or the
+    whole range: the profile's first step is then the range's end)."""
+    if name in determination.combinations:
+        entry = determination.combinations[name]
+        return entry["low"], entry["high"]
+    interval = determination.intervals.get(name)
+    if interval is None or name in determination.free:
+        return None, None
+    return interval[0], interval[1]
+
+
+def open_reason(problem: CalibrationProblem, fit: LocalFit, name: str, kind: str) -> str | None:
+    """Why the curves bound ``name`` from one side only, where the physics says: Mp
+    bounded only from below where no model curve at the optimum saturates before the
+    rig's last angle (a larger plastic moment gives the same curves)."""
+    if name != "plastic_moment_n" or kind != "lower-bound":
+        return None
+    angle = problem.angle_deg
+    if any(curve_features(angle, curve).saturated for curve in fit.curves):
+        return None
+    return f"the curves show no plateau before {angle[-1]:g}°"
 
 
 # -- the loop ----------------------------------------------------------------------------------
@@ -308,6 +369,9 @@ class CalibrationLoop:
         self.fits: list[LocalFit] = []
         self.iterations = 0
         self.basins = BasinSearch(False, "the loop has not run")
+        self.intervals = True  # whether run() ends with the profiles of the best fit
+        self.determination: Determination | None = None  # of the best fit, profiled
+        self._profiled: LocalFit | None = None  # the fit ``determination`` is of
         if progress:
             runs.say = self._say
 
@@ -362,6 +426,72 @@ class CalibrationLoop:
             if record is not None:
                 self._local(residuals, record)
         self._search_basins(model, surrogate_trials)
+        if self.intervals:
+            self._profile_best()
+
+    # -- what the curves determine (:mod:`._profile`) ------------------------------------------
+    def _profile_best(self) -> None:
+        """The profile intervals of the best fit, where it is a verified local optimum
+        (``determination``); a profile point below the optimum (another basin) is fitted
+        locally and profiled again, at most ``PROFILE_ROUNDS`` times."""
+        for _ in range(PROFILE_ROUNDS):
+            fit = self.best_fit()
+            if fit is None or not self.converged_at_best():
+                return
+            before = self.runs.calls
+            limit = before + max(int(PROFILE_SHARE * before), 1)
+            model = ResidualModel(self.problem, self.profile_runs(), budget=limit)
+            linear = determination_at(self.problem, fit)
+            quantities = [
+                (q, _linear_ends(linear, q.name)) for q in profiled_quantities(self.problem)
+            ]
+            self._say(
+                f"profiling {len(quantities)} quantities, within {limit - before} solver runs"
+            )
+            profiles, better = profile(model, fit, quantities)
+            spent = self.runs.calls - before
+            if better is not None:
+                self._say("a profile found a point below the optimum: another basin")
+                self._try_basin(better, None, "a profile's point below the optimum")
+                if self.best_fit() is not fit:
+                    continue
+            self.determination, self._profiled = self._checked(fit, linear, profiles, spent), fit
+            self._say(f"profiles: {self.determination.statement} ({spent} solver runs)")
+            return
+
+    def determination_of(self, fit: LocalFit) -> Determination:
+        """What the curves determine at a converged fit: its profiles where they were made
+        (``determination``), else the linear intervals, each ``unchecked``."""
+        if self.determination is not None and self._profiled is fit:
+            return self.determination
+        linear = determination_at(self.problem, fit)
+        space = self.problem.space
+        low, high = np.array([p.low for p in space]), np.array([p.high for p in space])
+        entries = linear_entries(linear, space.names, fit.theta, low, high)
+        return checked(linear, space.names, fit.theta, entries, _LABELS, solver_calls=0)
+
+    def profile_runs(self) -> SolverRuns:
+        """The runs the profiles re-fit with: the full solver's (a corrected loop: the
+        corrected built-in model's)."""
+        return self.runs
+
+    def _checked(
+        self, fit: LocalFit, linear: Determination, profiles: list[Profile], spent: int
+    ) -> Determination:
+        entries = {}
+        for found in profiles:
+            entry = {
+                "value": found.value,
+                "low": found.lower.end,
+                "high": found.upper.end,
+                "kind": found.kind,
+                "method": found.method,
+            }
+            reason = open_reason(self.problem, fit, found.name, found.kind)
+            entries[found.name] = {**entry, **({"reason": reason} if reason else {})}
+        return checked(
+            linear, self.problem.space.names, fit.theta, entries, _LABELS, solver_calls=spent
+        )
 
     def p_value(self, fit: LocalFit) -> float:
         """F-test of the fit's misfit against the noise (small: systematic)."""

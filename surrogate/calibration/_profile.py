@@ -1,0 +1,530 @@
+"""Profile intervals: what the curves determine, by constrained re-fits with the solver.
+
+The linearised (delta-method) interval of :mod:`._determination` is a shortcut: where
+the curves bound a quantity from one side only — a coat whose curves never reach their
+plateau before 90° fits as well with any larger plastic moment — or where the misfit
+rises along a curved valley, it can exclude the truth (seen: "Mp to ±13 %" with the
+truth 25.7 % above; "Tcoat ±0.07 %" with the truth 17 % below). The profile re-fits the
+model with the quantity held, and keeps the values whose re-fit stays under the
+threshold (Raue et al. 2009; lmfit's ``conf_interval``; Bates & Watts 1988, §6.1).
+
+Notations
+---------
+``x`` : (p,)
+    The fit coordinates of the local phase (:class:`~._local.FitCoordinates`: log D,
+    log Mp and Tcoat for the coating, every other parameter its unit coordinate); the
+    box ``[0, 1]^p`` is the declared one.
+``q(x)``
+    The profiled quantity in its declared scale: ``log`` of D, Mp and a log-scaled
+    parameter, the value of a linear one; ``q*`` at the optimum ``x*``.
+``RSS*``, ``s² = RSS*/dof``, ``Δ = t²₀.₉₇₅(dof) · s²``
+    The optimum's misfit and the threshold: a value ``v`` of ``q`` lies in the 95 %
+    interval where ``min{RSS(x) : q(x) = v} − RSS* ≤ Δ`` (the F-test of one parameter;
+    for a linear model the profile interval is the delta-method one exactly).
+``η``
+    The step ``v − q*`` of a side; ``ρ = ΔRSS/Δ`` where it ends.
+
+One side
+--------
+Its first step is the linear interval's end (the range's end where the linear interval
+has none). The constrained minimum at ``q = v`` (:meth:`Profiler._refit`): the last
+point moved onto ``q = v`` along ``g = ∂q/∂x`` (algebra, no runs), then Gauss–Newton
+steps within the constraint's tangent plane (``g·d = 0``), each moved back onto it; the
+Jacobian is the optimum's, updated by Broyden's rule at each point (no differences: a run
+a condition group an evaluation, ``NUISANCE_EVALUATIONS`` at most). Where ``ρ`` lies
+within ``AGREES`` the end is found — at the first step, the linear interval stands
+(``method`` ``linear``); else the next ``η`` by the secant rule on ``√ΔRSS`` (between
+bracketing steps, by interpolation), at most ``MAX_STEPS``. A side whose step at the end
+of the quantity's range still lies under the threshold is *open*: the curves do not
+bound it there.
+
+A profile point whose RSS lies more than ``BETTER_CHI2 · s²`` below the optimum's is
+another basin (``better``): the calibration fits again from there.
+
+What each side bounds, ``kind``: ``two-sided``, ``lower-bound`` (the upper side open),
+``upper-bound``, ``free`` (both open).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import stats
+from scipy.optimize import lsq_linear
+
+from ._determination import LEVEL, interval_kind_of
+from ._local import BudgetSpent, LocalFit, ResidualModel, bound_sides, broyden_update
+
+__all__ = [
+    "AGREES",
+    "Profile",
+    "ProfileSide",
+    "Quantity",
+    "profile",
+]
+
+_LOG = logging.getLogger(__name__)
+
+AGREES = (0.8, 1.25)  # ΔRSS/Δ at a side's end: found (the end within ~±10 % of its step)
+NUISANCE_EVALUATIONS = 3  # residual evaluations of one constrained re-fit
+FIRST_EVALUATIONS = 2  # …of a side's first (the linear end's check)
+FAR_OVER = 25.0  # a re-fit this far over the threshold (ρ) after a step: no more steps
+END_PRECISION = 0.1  # a bracket this narrow (share of its far step): the end, the far step
+MAX_STEPS = 8  # constrained re-fits of one side, at most
+BETTER_CHI2 = 1.0  # a profile point this many s² below the optimum: another basin
+TRUST = 0.2  # a re-fit's Gauss–Newton step moves no coordinate farther than this
+ONTO_STEPS = 4  # Newton's steps onto the constraint (algebra)
+OPEN_UNIT = 1e-3  # a step within this share of the quantity's range of its end: at the end
+FD_STEP_Q = 1e-6  # differences of q(x) (algebra, no runs)
+EXTENT_BISECTIONS = 30  # of the linear prediction's extent within the ranges (algebra)
+LINEAR_BLIND = 0.5  # a linear end this share of the range away: the linearisation is blind
+FIRST_UNSEEN = 0.05  # the first step of a side the curves do not see at the optimum: this
+# share of the quantity's range (a coat's plastic moment where none yields: zero slope there)
+NULL_SINGULAR = 1e-10  # a singular value of J below this share of the largest: not seen
+UNSEEN_SHARE = 0.1  # …and a share of g² this large along such directions: moved along them
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """A quantity to profile: its name (a JSON key), the function of the parameters
+    (declared units) it is, whether it is log-scaled, and its range over the box
+    (``low``, ``high``: the ends of the declared ranges for a parameter)."""
+
+    name: str
+    value: Callable[[np.ndarray], float]
+    log: bool
+    low: float
+    high: float
+
+    def scaled(self, theta: np.ndarray) -> float:
+        """``q`` at parameters ``theta``: in the declared scale."""
+        return self.scale(self.value(theta))
+
+    def scale(self, value: float) -> float:
+        return math.log(value) if self.log else value
+
+    def unscaled(self, q: float) -> float:
+        return math.exp(q) if self.log else q
+
+    @property
+    def range_scaled(self) -> tuple[float, float]:
+        return (math.log(self.low), math.log(self.high)) if self.log else (self.low, self.high)
+
+
+@dataclass(frozen=True)
+class ProfileSide:
+    """One side of a profile interval.
+
+    ``end`` is the quantity's value where the re-fit reaches the threshold (declared
+    units), None where the side is *open* (its range end fits under the threshold;
+    ``point`` is then the re-fit at that end); ``method`` ``linear`` where the linear
+    interval's end was checked and stands, ``profile`` where the re-fits placed it,
+    ``unchecked`` where the budget stopped the profile before it did (the linear end
+    then stands, unchecked); ``ratio`` is ``ΔRSS/Δ`` at ``point``; ``steps`` the
+    re-fits made; ``point`` the parameters of the last re-fit (an alternative fit the
+    data hardly tell from the optimum: what a next test should separate)."""
+
+    end: float | None
+    method: str
+    ratio: float | None
+    steps: int
+    point: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Profile:
+    """The profile interval of one quantity: ``value`` at the optimum, its two sides,
+    and ``kind``."""
+
+    name: str
+    value: float
+    lower: ProfileSide
+    upper: ProfileSide
+
+    @property
+    def kind(self) -> str:
+        return interval_kind_of(self.lower.end is not None, self.upper.end is not None)
+
+    @property
+    def method(self) -> str:
+        """``profile`` where a re-fit placed either end, ``linear`` where the linear ends
+        were checked and stand, ``unchecked`` where a side was not checked."""
+        methods = {self.lower.method, self.upper.method}
+        return next(m for m in ("unchecked", "profile", "linear") if m in methods)
+
+
+@dataclass(frozen=True)
+class _Step:
+    """One re-fit of a side: how far it reached (``size``, ``|q − q*|``), ``ρ``, the point
+    and the Jacobian there, whether a range holds it."""
+
+    size: float
+    ratio: float
+    x: np.ndarray
+    jac: np.ndarray
+    held: bool
+
+    def point(self, profiler: Profiler) -> np.ndarray:
+        return profiler.model.point(self.x)
+
+
+@dataclass
+class _Optimum:
+    """The optimum a profile starts from, in fit coordinates."""
+
+    x: np.ndarray
+    rss: float
+    jacobian: np.ndarray  # ∂r/∂x at x
+    threshold: float  # Δ
+    sigma2: float  # s²
+
+
+class Profiler:
+    """Profiles of quantities about a converged local fit, with the runs of ``model``.
+
+    Parameters
+    ----------
+    model : ResidualModel
+        ``r(x)`` through the (cheapest exact-enough) solver, with its budget.
+    fit : LocalFit
+        The converged optimum; its ``at_bound`` counts the free parameters.
+    """
+
+    def __init__(self, model: ResidualModel, fit: LocalFit) -> None:
+        self.model = model
+        x = model.pin(fit.theta)
+        residual = model.residual(x)
+        rss = float(residual @ residual)
+        dof = max(residual.size - int(np.sum(np.asarray(fit.at_bound) == 0)), 1)
+        sigma2 = rss / dof
+        t = float(stats.t.ppf(0.5 + LEVEL / 2, dof))
+        self.optimum = _Optimum(x, rss, model.jacobian(x), t * t * sigma2, sigma2)
+        self.better: np.ndarray | None = None  # a point below the optimum: another basin
+        self.seen: list[_Step] = []  # every re-fit so far (of any quantity)
+
+    def profile(self, quantity: Quantity, linear: tuple[float | None, float | None]) -> Profile:
+        """Both sides of ``quantity``'s interval; ``linear``: the linear interval's ends
+        (declared units; None where it has none: the first step is then the range's end)."""
+        theta = self.model.point(self.optimum.x)
+        sides = [self._side(quantity, sign, linear[k]) for k, sign in enumerate((-1.0, 1.0))]
+        return Profile(quantity.name, quantity.value(theta), sides[0], sides[1])
+
+    # -- one side ------------------------------------------------------------------------------
+    def _side(self, quantity: Quantity, sign: float, linear_end: float | None) -> ProfileSide:
+        """One side of ``quantity``'s interval (``sign`` −1 lower, +1 upper): the bracket of
+        steps under and over the threshold narrowed until a step's ``ρ`` lies within
+        ``AGREES``, or the bracket is within ``END_PRECISION`` of its far end (the end: the
+        step over, the wider), or the side is open — its range end under the threshold, or
+        the step over it held by a range: a parameter pressed against a bound the optimum
+        was not at (the ranges end it there, not the curves: Tcoat along the valley of
+        equally good coats until Ecoat reaches its bound), with the bracket under
+        ``OPEN_BRACKET`` of the quantity's range or the steps spent.
+
+        Every point the profiles found under the threshold is in the 95 % region: the
+        farthest of them along ``q`` starts the bracket (a side it reaches the range end
+        of costs no run)."""
+        optimum = self.optimum
+        q0 = quantity.scaled(self.model.point(optimum.x))
+        span = abs(np.diff(quantity.range_scaled)[0])
+        far = abs(quantity.range_scaled[1 if sign > 0 else 0] - q0)  # |η| of the range's end
+        under = self._farthest_under(quantity, q0, sign)
+        if far - under.size <= OPEN_UNIT * span:
+            return ProfileSide(None, "profile", under.ratio, 0, under.point(self))
+        extent = self._extent(quantity, q0, sign, far)
+        size = far if linear_end is None else min(abs(quantity.scale(linear_end) - q0), far)
+        if linear_end is None or size >= LINEAR_BLIND * span:  # the linearisation sees little
+            linear_end, size = None, min(far, FIRST_UNSEEN * span)  # of it: small steps first
+        if size <= under.size:  # a point under the threshold lies beyond the linear end
+            size = min(far, 2.0 * under.size)
+        size = min(size, max(extent, under.size))  # no farther than the ranges let it go
+        over: _Step | None = None  # the nearest over it
+        interpolated = False  # whether the last step was placed by interpolation
+        for step in range(1, MAX_STEPS + 1):
+            try:  # from the farthest point under the threshold: a good fit, a good Jacobian
+                x, jac = self._refit(
+                    quantity,
+                    q0 + sign * size,
+                    under.x,
+                    under.jac,
+                    FIRST_EVALUATIONS if step == 1 else NUISANCE_EVALUATIONS,
+                )
+            except BudgetSpent:
+                return self._unfinished(quantity, q0, sign, linear_end, under, over, step)
+            found = self._step(quantity, q0, sign, x, jac)
+            self._log(quantity, sign, step, size, far, found)
+            if found.ratio <= AGREES[1]:
+                ends = AGREES[0] <= found.ratio and not found.held
+                if ends and step == 1 and linear_end is not None and size < far:
+                    return ProfileSide(linear_end, "linear", found.ratio, step, found.point(self))
+                if ends:
+                    return self._ended(quantity, q0, sign, found, step)
+                ranges = extent < far and found.size >= (1.0 - OPEN_UNIT) * extent
+                if far - found.size <= OPEN_UNIT * span or ranges:
+                    return ProfileSide(None, "profile", found.ratio, step, found.point(self))
+                under = found if found.size > under.size else under
+            elif over is None or found.size < over.size:
+                over = found
+            if over is not None and over.size - under.size <= END_PRECISION * over.size:
+                return self._bracketed(quantity, q0, sign, under, over, step)
+            size, interpolated = self._next_size(under, over, far, interpolated)
+        if over is None:  # not closed by the curves within the steps
+            return ProfileSide(None, "profile", under.ratio, MAX_STEPS, under.point(self))
+        return self._bracketed(quantity, q0, sign, under, over, MAX_STEPS)
+
+    def _bracketed(
+        self, quantity: Quantity, q0: float, sign: float, under: _Step, over: _Step, steps: int
+    ) -> ProfileSide:
+        """The side ended between a point under the threshold and one over it: at the one
+        over (the wider interval) — or open where the one under is held by a range (a
+        parameter at a bound the optimum was not at: there the ranges end it, not the
+        curves)."""
+        if under.held:
+            return ProfileSide(None, "profile", under.ratio, steps, under.point(self))
+        return self._ended(quantity, q0, sign, over, steps)
+
+    def _ended(
+        self, quantity: Quantity, q0: float, sign: float, found: _Step, steps: int
+    ) -> ProfileSide:
+        """The side ended at ``found`` (open where that is the range's end)."""
+        end = self._end_value(quantity, q0, sign, found.size)
+        return ProfileSide(end, "profile", found.ratio, steps, found.point(self))
+
+    def _end_value(self, quantity: Quantity, q0: float, sign: float, size: float) -> float | None:
+        """The quantity at ``|η| = size`` on this side; None at the range's end (the
+        ranges, not the curves, end it there)."""
+        end = quantity.range_scaled[1 if sign > 0 else 0]
+        span = abs(np.diff(quantity.range_scaled)[0])
+        if abs(end - (q0 + sign * size)) <= OPEN_UNIT * span:
+            return None
+        return quantity.unscaled(q0 + sign * size)
+
+    def _unfinished(
+        self,
+        quantity: Quantity,
+        q0: float,
+        sign: float,
+        linear_end: float | None,
+        under: _Step,
+        over: _Step | None,
+        step: int,
+    ) -> ProfileSide:
+        """A side the budget stopped: ``unchecked``, its end the nearest step over the
+        threshold where one was made, else the linear end where no point under the
+        threshold lies beyond it, else open."""
+        end: float | None
+        if over is not None:
+            end = self._end_value(quantity, q0, sign, over.size)
+        elif linear_end is not None and abs(quantity.scale(linear_end) - q0) > under.size:
+            end = linear_end
+        else:
+            end = None
+        return ProfileSide(end, "unchecked", None, step - 1, under.point(self))
+
+    def _extent(self, quantity: Quantity, q0: float, sign: float, far: float) -> float:
+        """How far (``|η|``) the optimum's linear prediction of the re-fits goes on this
+        side before a range holds it — a coordinate leaves the box, or a parameter the
+        optimum is not at a bound of reaches one (algebra, no runs): ``far`` where none
+        does. A side under the threshold there is open: beyond it the ranges, not the
+        curves, end it."""
+        optimum = self.optimum
+        gradient = self._gradient(quantity, optimum.x)
+        direction = _linear_shift(optimum.jacobian, gradient, sign, capped=False)
+        inside = self._sides(optimum.x) == 0
+
+        def holds(eta: float) -> bool:
+            x = optimum.x + eta * direction
+            if np.any(x < 0.0) or np.any(x > 1.0):
+                return True
+            moved = self.model.coordinates.to_unit(x)
+            return bool(np.any((bound_sides(moved) != 0) & inside))
+
+        if not holds(far):
+            return far
+        low, high = 0.0, far
+        for _ in range(EXTENT_BISECTIONS):
+            middle = 0.5 * (low + high)
+            low, high = (low, middle) if holds(middle) else (middle, high)
+        return low
+
+    def _farthest_under(self, quantity: Quantity, q0: float, sign: float) -> _Step:
+        """Of the optimum and every point the profiles found under the threshold, the one
+        farthest along ``sign · q``."""
+        best = _Step(0.0, 0.0, self.optimum.x, self.optimum.jacobian, False)
+        for seen in self.seen:
+            reach = sign * (quantity.scaled(self.model.point(seen.x)) - q0)
+            if seen.ratio < AGREES[0] and reach > best.size:
+                best = _Step(reach, seen.ratio, seen.x, seen.jac, False)
+        return best
+
+    def _step(
+        self, quantity: Quantity, q0: float, sign: float, x: np.ndarray, jac: np.ndarray
+    ) -> _Step:
+        """A re-fit's point judged: how far it reached, its ``ρ``, whether a range holds it
+        (a parameter at a bound that the optimum was not at, the profiled one aside); kept
+        in ``seen``, and as ``better`` where it lies below the optimum."""
+        optimum, model = self.optimum, self.model
+        residual = model.residual(x)
+        delta = float(residual @ residual) - optimum.rss
+        point = model.point(x)
+        if delta < -BETTER_CHI2 * optimum.sigma2:
+            self.better = point
+        pinned = (self._sides(x) != 0) & (self._sides(optimum.x) == 0)
+        if quantity.name in model.problem.space.names:
+            pinned[model.problem.space.names.index(quantity.name)] = False
+        reached = max(sign * (quantity.scaled(point) - q0), 0.0)
+        found = _Step(reached, delta / optimum.threshold, x, jac, bool(np.any(pinned)))
+        self.seen.append(found)
+        return found
+
+    def _log(
+        self, quantity: Quantity, sign: float, step: int, size: float, far: float, found: _Step
+    ) -> None:
+        _LOG.debug(
+            "profile of %s, %s side, step %d: |η| %.4g reached %.4g (range end %.4g), ρ %.4g%s",
+            quantity.name,
+            "upper" if sign > 0 else "lower",
+            step,
+            size,
+            found.size,
+            far,
+            found.ratio,
+            ", a range holds it" if found.held else "",
+        )
+
+    def _sides(self, x: np.ndarray) -> np.ndarray:
+        return bound_sides(self.model.coordinates.to_unit(x))
+
+    def _next_size(
+        self, under: _Step, over: _Step | None, far: float, interpolated: bool
+    ) -> tuple[float, bool]:
+        """The next |η|, and whether interpolation placed it: beyond the farthest step under
+        the threshold by the secant rule (``√ΔRSS ∝ |η|``, at least twice as far) where none
+        is over it; else between the two — by interpolation of ``√ΔRSS``, and halfway after
+        an interpolated step that did not end it (a steep rise, such as a coat starting to
+        yield, makes interpolation creep) or where a range holds the one over."""
+        if over is None:
+            if under.ratio <= 0.0:
+                return min(far, max(4.0 * under.size, 1e-6)), False
+            return min(far, max(under.size / math.sqrt(under.ratio), 2.0 * under.size)), False
+        if interpolated or over.held:  # a range holds the one over: no slope to follow
+            return 0.5 * (under.size + over.size), False
+        low, high = math.sqrt(max(under.ratio, 0.0)), math.sqrt(over.ratio)
+        share = (1.0 - low) / (high - low) if high > low else 0.5
+        return under.size + min(max(share, 0.1), 0.9) * (over.size - under.size), True
+
+    def _refit(
+        self,
+        quantity: Quantity,
+        target: float,
+        start: np.ndarray,
+        jac: np.ndarray,
+        evaluations: int,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The constrained re-fit at ``q = target``: ``start`` moved onto the constraint
+        (:meth:`_onto`), then Gauss–Newton steps of every coordinate within the
+        constraint's tangent plane, each moved back onto it; at every point evaluated the
+        Jacobian of ``r`` is updated by Broyden's rule (no differences). A step that did
+        not lower the RSS is halved once. The evaluated point of lowest RSS, and the
+        Jacobian."""
+        model = self.model
+        last_x, last_r = start, model.residual(start)
+        gap = target - quantity.scaled(model.point(start))
+        shift = _linear_shift(jac, self._gradient(quantity, start), gap)
+        x = self._onto(quantity, np.clip(start + shift, 0.0, 1.0), target)
+        best, best_rss = x, math.inf
+        for _ in range(evaluations):
+            r = model.residual(x)
+            if np.any(x != last_x):
+                jac = broyden_update(jac, x - last_x, r - last_r)
+                last_x, last_r = x, r
+            rss = float(r @ r)
+            if rss >= best_rss:  # the step overshot: half of it, from the best point
+                x = self._onto(quantity, 0.5 * (best + x), target)
+                continue
+            best, best_rss = x, rss
+            ratio = (rss - self.optimum.rss) / self.optimum.threshold
+            if ratio <= AGREES[1] or ratio > FAR_OVER:
+                break  # under the threshold or at it (more steps only lower it), or far over
+            step = _tangent_step(r, jac, self._gradient(quantity, x), x)
+            if np.max(np.abs(step)) < 1e-9:
+                break
+            x = self._onto(quantity, x + step, target)
+        return best, jac
+
+    def _onto(self, quantity: Quantity, x: np.ndarray, target: float) -> np.ndarray:
+        """``x`` moved onto ``q = target`` along ``∂q/∂x`` (Newton's steps on algebra, no
+        runs), within the box."""
+        for _ in range(ONTO_STEPS):
+            gap = target - quantity.scaled(self.model.point(x))
+            gradient = self._gradient(quantity, x)
+            norm = float(gradient @ gradient)
+            if abs(gap) < 1e-12 or norm == 0.0:
+                break
+            x = np.clip(x + gap * gradient / norm, 0.0, 1.0)
+        return x
+
+    def _gradient(self, quantity: Quantity, x: np.ndarray) -> np.ndarray:
+        """``∂q/∂x`` by central differences of algebra (no runs)."""
+        gradient = np.empty(x.size)
+        for j in range(x.size):
+            step = np.zeros(x.size)
+            step[j] = FD_STEP_Q
+            up = self.model.point(np.clip(x + step, 0.0, 1.0))
+            down = self.model.point(np.clip(x - step, 0.0, 1.0))
+            gradient[j] = (quantity.scaled(up) - quantity.scaled(down)) / (2 * FD_STEP_Q)
+        return gradient
+
+
+def _linear_shift(
+    jac: np.ndarray, gradient: np.ndarray, eta: float, *, capped: bool = True
+) -> np.ndarray:
+    """The Gauss–Newton model's constrained minimum: the step ``δ`` with ``g·δ = η`` that
+    least raises ``‖r + J δ‖`` — along the directions ``J`` does not see at all where
+    ``g`` has a share ``UNSEEN_SHARE`` of them (it costs nothing there), else
+    ``η C g / gᵀCg`` with ``C = (JᵀJ)⁻¹`` from the singular values of ``J`` (not of
+    ``JᵀJ``: a valley of equally good coats makes it too ill-conditioned to square); no
+    coordinate moved farther than ``TRUST`` (a sliver of an unseen direction in ``g``
+    made it leap along the valley; ``capped`` False: the step as the model has it)."""
+    _, singular, vt = np.linalg.svd(jac, full_matrices=False)
+    seen = singular > NULL_SINGULAR * max(float(singular.max(initial=0.0)), 1e-300)
+    basis = vt[seen]
+    unseen = gradient - basis.T @ (basis @ gradient)
+    if float(unseen @ unseen) >= UNSEEN_SHARE * float(gradient @ gradient):
+        shift = eta * unseen / float(gradient @ unseen)
+    else:
+        solved = basis.T @ ((basis @ gradient) / singular[seen] ** 2)
+        along = float(gradient @ solved)
+        shift = eta * solved / along if along > 0.0 else np.zeros_like(gradient)
+    if not capped:
+        return shift
+    largest = float(np.max(np.abs(shift), initial=0.0))
+    return shift * (TRUST / largest) if largest > TRUST else shift
+
+
+def _tangent_step(
+    residual: np.ndarray, jac: np.ndarray, gradient: np.ndarray, x: np.ndarray
+) -> np.ndarray:
+    """The Gauss–Newton step ``d`` that minimises ``‖r + J d‖`` with ``g·d = 0`` (a heavy
+    row), within the box and ``±TRUST`` of ``x``."""
+    weight = (
+        1e3 * max(float(np.linalg.norm(jac)), 1e-12) / max(float(np.linalg.norm(gradient)), 1e-300)
+    )
+    matrix = np.vstack([jac, weight * gradient])
+    low = np.maximum(-x, -TRUST)
+    high = np.maximum(np.minimum(1.0 - x, TRUST), low + 1e-15)
+    return lsq_linear(matrix, np.append(-residual, 0.0), bounds=(low, high), method="bvls").x
+
+
+def profile(
+    model: ResidualModel, fit: LocalFit, quantities: Sequence[tuple[Quantity, Any]]
+) -> tuple[list[Profile], np.ndarray | None]:
+    """Profiles of ``quantities`` (each with its linear interval's ends) about ``fit``, and
+    a point below the optimum where one was found (another basin), else None."""
+    profiler = Profiler(model, fit)
+    found = [profiler.profile(quantity, linear) for quantity, linear in quantities]
+    return found, profiler.better
