@@ -494,13 +494,14 @@ def _calibrate(args: argparse.Namespace) -> int:
 
 
 def _interval(determination: dict[str, Any] | None, name: str) -> str:
-    """`` [low, high]`` of a calibrated parameter, or what stands in for it."""
+    """A calibrated parameter's 95 % interval as the table shows it (``" [low, high]"``,
+    a one-sided bound or free, and how it was found), or what stands in for it."""
     if determination is None:
         return ""
-    if name in determination["held_at_bound"]:
-        return " (held at its bound)"
-    low, high = determination["intervals"][name]
-    return f" [{low:.4g}, {high:.4g}]" + (" free" if name in determination["free"] else "")
+    from .calibration._determination import parameter_interval_text
+
+    held = " (held at its bound)" if name in determination["held_at_bound"] else ""
+    return f" [{parameter_interval_text(name, determination)}]{held}"
 
 
 # surrogate compare ---------------------------------------------------------------------

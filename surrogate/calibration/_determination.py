@@ -37,7 +37,14 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-__all__ = ["Determination", "checked", "determine", "interval_kind_of", "linear_entries"]
+__all__ = [
+    "Determination",
+    "checked",
+    "determination_threshold",
+    "determine",
+    "interval_kind_of",
+    "linear_entries",
+]
 
 LEVEL = 0.95
 FREE_SHARE = 0.25  # a 95 % interval this wide a share of the range: the linearisation is not
@@ -79,8 +86,8 @@ class Determination:
 
     sigma_n: float
     dof: int
-    combinations: dict[str, dict[str, float | None]]
-    intervals: dict[str, list[float] | None]
+    combinations: dict[str, dict[str, Any]]
+    intervals: dict[str, Any]  # linear: [low, high] or None; checked: an entry like a combination's
     free: list[str]
     held_at_bound: list[str]
     directions: list[dict[str, Any]]
@@ -150,6 +157,13 @@ def determine(
         directions=_directions(names, free_index, covariance, t),
         statement=statement,
     )
+
+
+def determination_threshold(rss: float, dof: int) -> float:
+    """The 95 % threshold of a profile: how far above ``rss`` a re-fit's RSS may lie,
+    ``t²₀.₉₇₅(dof) · rss/dof`` (the F-test of one parameter, :mod:`._profile`)."""
+    t = float(stats.t.ppf(0.5 + LEVEL / 2, max(dof, 1)))
+    return t * t * rss / max(dof, 1)
 
 
 def _to_z(values: np.ndarray, log: np.ndarray) -> np.ndarray:
@@ -426,7 +440,7 @@ def checked(
         sigma_n=linear.sigma_n,
         dof=linear.dof,
         combinations=combinations,
-        intervals=intervals,  # type: ignore[arg-type]
+        intervals=intervals,
         free=free,
         held_at_bound=linear.held_at_bound,
         directions=linear.directions,

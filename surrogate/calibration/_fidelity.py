@@ -49,6 +49,7 @@ from ..solvers._fidelity import (
     low_fidelity_inputs,
     not_carried,
 )
+from ._determination import Determination, determination_threshold
 from ._local import (
     BACKTRACK,
     FIRST_ORDER_BOX,
@@ -71,6 +72,7 @@ from ._loop import (
     determination_at,
 )
 from ._problem import CalibrationProblem
+from ._profile import Profile
 from ._statistics import SIGNIFICANCE
 
 __all__ = ["CorrectedCalibration", "CorrectedRuns", "CurveCorrection"]
@@ -84,6 +86,8 @@ PROBE_STEP = 0.25  # the probes: a quarter of a range either way (``_probes``)
 SHRINK_BELOW, EXPAND_ABOVE = 0.25, 0.75  # ratios: a quarter of the step / twice the radius
 CRAWL = 2  # verified proposals in a row, each gaining under ROUGH_CHI2 units of χ²: a stall
 MIN_RADIUS = FIRST_ORDER_BOX / BACKTRACK[-1]  # the smallest step the first-order test tries
+VERIFY_RUNS = 10  # expensive runs at the profile ends, at most (on top of the calibration's)
+VERIFIED = (0.5, 2.0)  # the expensive misfit at an end: within this of the threshold, it stands
 
 
 def _step(model: ResidualModel, theta: np.ndarray, best: VerifiedPoint) -> float:
@@ -229,6 +233,89 @@ class CorrectedCalibration(CalibrationLoop):
         if start is not None:
             raise ValueError("the corrected loop begins at the corrected model's optimum")
         self._run(surrogate_trials)
+        if self.intervals:
+            self._profile_best()
+
+    # -- what the curves determine: profiles on the corrected model, ends verified ------------
+    def _profile_best(self) -> None:
+        """The profiles run on the corrected model (built-in runs) and their ends are
+        verified by the expensive solver (:meth:`verified_ends`); not where the correction
+        was dropped (no cheaper model is exact enough there: the linear intervals stand,
+        unchecked)."""
+        if self.dropped is not None:
+            self._say("the correction was dropped: the intervals are the linear ones, unchecked")
+            return
+        super()._profile_best()
+
+    def profile_runs(self) -> SolverRuns:
+        return self.corrected_runs(self.correction)
+
+    def profile_budget(self) -> int:
+        return LOW_FIDELITY_BUDGET  # built-in runs: the expensive ones are verified_ends'
+
+    def profiled_runs(self, runs: SolverRuns) -> None:
+        assert isinstance(runs, CorrectedRuns)
+        self._counted(runs)
+
+    def follow_better(self, better: np.ndarray) -> bool:
+        self._say(
+            "a profile found a lower misfit of the corrected model than its optimum's: not "
+            f"followed with {self.problem.spec.solver} runs (the basin caveat applies)"
+        )
+        return False
+
+    def verified_ends(self, determination: Determination, profiles: list[Profile]) -> Determination:
+        """Each profile end (D and Mp first) run by the expensive solver at the re-fit that
+        placed it, at most ``VERIFY_RUNS`` runs: an end stands where the expensive misfit
+        there lies within ``VERIFIED`` of the threshold above the best verified point's
+        (``verified``: per side, the solver and that ratio); the statement says which
+        ends were verified and which not."""
+        kind, problem = self.problem.spec.solver, self.problem
+        best = self.best()
+        assert best is not None
+        rss_best = best.rmse**2 * problem.n_points
+        threshold = determination_threshold(rss_best, determination.dof)
+        entries = {**determination.combinations, **determination.intervals}
+        left, said = VERIFY_RUNS, {"held": 0, "missed": 0, "left": 0}
+        for found in profiles:
+            entry = entries[found.name] = {**entries[found.name], "verified": {}}
+            for key, side in (("low", found.lower), ("high", found.upper)):
+                if side.end is None or side.point is None:
+                    continue
+                thetas, groups = problem.at_every_group(side.point)
+                cost = self.runs.cost(thetas, groups)
+                if cost > left:
+                    entry["verified"][key] = None
+                    said["left"] += 1
+                    continue
+                left -= cost
+                out = self.runs.run(thetas, groups)
+                if any(o is None for o in out):
+                    entry["verified"][key] = None
+                    said["left"] += 1
+                    continue
+                curves = np.array([o.curve for o in out if o is not None])
+                ratio = (problem.rmse(curves) ** 2 * problem.n_points - rss_best) / threshold
+                holds = VERIFIED[0] <= ratio <= VERIFIED[1]
+                entry["verified"][key] = {"by": kind, "ratio": ratio, "holds": holds}
+                said["held" if holds else "missed"] += 1
+        combinations = {k: entries[k] for k in determination.combinations}
+        intervals = {k: entries[k] for k in determination.intervals}
+        note = (
+            f"; {kind} verified {said['held']} of the interval ends"
+            + (
+                f", found {said['missed']} off the threshold (those are the corrected model's)"
+                if said["missed"]
+                else ""
+            )
+            + (f", left {said['left']} unverified (its {VERIFY_RUNS} runs)" if said["left"] else "")
+        )
+        return replace(
+            determination,
+            combinations=combinations,
+            intervals=intervals,
+            statement=determination.statement + note,
+        )
 
     def _run(self, surrogate_trials: int) -> None:
         start = self._corrected_optimum(surrogate_trials)

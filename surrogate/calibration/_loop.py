@@ -280,8 +280,8 @@ _LABELS = {"bending_stiffness_nmm": "D ∝ Ecoat·Tcoat", "plastic_moment_n": "M
 
 def profiled_quantities(problem: CalibrationProblem) -> list[Quantity]:
     """What the profiles bound: D and Mp per unit width (where the space holds the
-    coating; their ranges over the box, :class:`~._local.FitCoordinates`), then every
-    parameter in the space's order."""
+    coating; their ranges over the box, :class:`~._local.FitCoordinates`), then Tcoat,
+    then every other parameter in the space's order."""
     space, thickness = problem.space, problem.spec.rig.thickness_mm
     names = space.names
     found: list[Quantity] = []
@@ -298,7 +298,11 @@ def profiled_quantities(problem: CalibrationProblem) -> list[Quantity]:
                 ]
 
             found.append(Quantity(key, section, True, float(np.exp(low)), float(np.exp(high))))
-    for k, spec in enumerate(space):
+    # Tcoat first of the parameters: its profile walks the valley of equally good coats,
+    # whose ends start Ecoat's and Scoat's (every point under the threshold is in the region)
+    order = sorted(range(len(space)), key=lambda k: names[k] != "tcoat_mm")
+    for k in order:
+        spec = space.parameters[k]
 
         def parameter(theta: np.ndarray, k: int = k) -> float:
             return float(theta[k])
@@ -438,9 +442,10 @@ class CalibrationLoop:
             fit = self.best_fit()
             if fit is None or not self.converged_at_best():
                 return
-            before = self.runs.calls
-            limit = before + max(int(PROFILE_SHARE * before), 1)
-            model = ResidualModel(self.problem, self.profile_runs(), budget=limit)
+            runs = self.profile_runs()
+            before = runs.calls
+            limit = before + self.profile_budget()
+            model = ResidualModel(self.problem, runs, budget=limit)
             linear = determination_at(self.problem, fit)
             quantities = [
                 (q, _linear_ends(linear, q.name)) for q in profiled_quantities(self.problem)
@@ -449,15 +454,34 @@ class CalibrationLoop:
                 f"profiling {len(quantities)} quantities, within {limit - before} solver runs"
             )
             profiles, better = profile(model, fit, quantities)
-            spent = self.runs.calls - before
-            if better is not None:
-                self._say("a profile found a point below the optimum: another basin")
-                self._try_basin(better, None, "a profile's point below the optimum")
+            spent = runs.calls - before
+            self.profiled_runs(runs)
+            if better is not None and self.follow_better(better):
                 if self.best_fit() is not fit:
                     continue
-            self.determination, self._profiled = self._checked(fit, linear, profiles, spent), fit
+            checked_ = self._checked(fit, linear, profiles, spent)
+            self.determination, self._profiled = self.verified_ends(checked_, profiles), fit
             self._say(f"profiles: {self.determination.statement} ({spent} solver runs)")
             return
+
+    def profile_budget(self) -> int:
+        """The runs the profiles may spend: ``PROFILE_SHARE`` of the calibration's."""
+        return max(int(PROFILE_SHARE * self.runs.calls), 1)
+
+    def profiled_runs(self, runs: SolverRuns) -> None:
+        """Told the runs the profiles made (a corrected loop counts its built-in ones)."""
+
+    def follow_better(self, better: np.ndarray) -> bool:
+        """A profile found a point below the optimum: fitted locally as another basin.
+        Whether it was followed."""
+        self._say("a profile found a point below the optimum: another basin")
+        self._try_basin(better, None, "a profile's point below the optimum")
+        return True
+
+    def verified_ends(self, determination: Determination, profiles: list[Profile]) -> Determination:
+        """The determination with its ends verified by the study's full solver: the
+        profiles ran on it, so every end is already its own."""
+        return determination
 
     def determination_of(self, fit: LocalFit) -> Determination:
         """What the curves determine at a converged fit: its profiles where they were made
@@ -478,6 +502,11 @@ class CalibrationLoop:
     def _checked(
         self, fit: LocalFit, linear: Determination, profiles: list[Profile], spent: int
     ) -> Determination:
+        """The determination of ``fit`` from its profiles: each entry with the linear
+        interval it checked (``linear``: its ``low``, ``high``, open where clipped)."""
+        space = self.problem.space
+        low, high = np.array([p.low for p in space]), np.array([p.high for p in space])
+        unchecked = linear_entries(linear, space.names, fit.theta, low, high)
         entries = {}
         for found in profiles:
             entry = {
@@ -486,6 +515,7 @@ class CalibrationLoop:
                 "high": found.upper.end,
                 "kind": found.kind,
                 "method": found.method,
+                "linear": {k: unchecked[found.name][k] for k in ("low", "high")},
             }
             reason = open_reason(self.problem, fit, found.name, found.kind)
             entries[found.name] = {**entry, **({"reason": reason} if reason else {})}

@@ -54,11 +54,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 from scipy.optimize import lsq_linear
 
-from ._determination import LEVEL, interval_kind_of
-from ._local import BudgetSpent, LocalFit, ResidualModel, bound_sides, broyden_update
+from ._determination import determination_threshold, interval_kind_of
+from ._local import BudgetSpent, LocalFit, ResidualModel, broyden_update
 
 __all__ = [
     "AGREES",
@@ -74,14 +73,19 @@ AGREES = (0.8, 1.25)  # ΔRSS/Δ at a side's end: found (the end within ~±10 % 
 NUISANCE_EVALUATIONS = 3  # residual evaluations of one constrained re-fit
 FIRST_EVALUATIONS = 2  # …of a side's first (the linear end's check)
 FAR_OVER = 25.0  # a re-fit this far over the threshold (ρ) after a step: no more steps
+PIN_UNIT = 1e-4  # a parameter this near a bound (share of its range) is held by it
+FLAT = 0.1  # ρ under this up to where a range holds the step over: the ranges end the side
+OPEN_PRECISION = 0.1  # …found to within this share of the quantity's range
+CONFIRM = 2.0  # an end is confirmed by a re-fit this much farther out…
+CONFIRM_RATIO = 2.0  # …whose ρ reaches this (a quadratic rise gives 4): else it was roughness
 END_PRECISION = 0.1  # a bracket this narrow (share of its far step): the end, the far step
 MAX_STEPS = 8  # constrained re-fits of one side, at most
 BETTER_CHI2 = 1.0  # a profile point this many s² below the optimum: another basin
 TRUST = 0.2  # a re-fit's Gauss–Newton step moves no coordinate farther than this
+DAMPING = 1e-8  # of ‖J‖²: the re-fit's Gauss–Newton steps, damped
 ONTO_STEPS = 4  # Newton's steps onto the constraint (algebra)
 OPEN_UNIT = 1e-3  # a step within this share of the quantity's range of its end: at the end
 FD_STEP_Q = 1e-6  # differences of q(x) (algebra, no runs)
-EXTENT_BISECTIONS = 30  # of the linear prediction's extent within the ranges (algebra)
 LINEAR_BLIND = 0.5  # a linear end this share of the range away: the linearisation is blind
 FIRST_UNSEEN = 0.05  # the first step of a side the curves do not see at the optimum: this
 # share of the quantity's range (a coat's plastic moment where none yields: zero slope there)
@@ -201,9 +205,8 @@ class Profiler:
         residual = model.residual(x)
         rss = float(residual @ residual)
         dof = max(residual.size - int(np.sum(np.asarray(fit.at_bound) == 0)), 1)
-        sigma2 = rss / dof
-        t = float(stats.t.ppf(0.5 + LEVEL / 2, dof))
-        self.optimum = _Optimum(x, rss, model.jacobian(x), t * t * sigma2, sigma2)
+        threshold = determination_threshold(rss, dof)
+        self.optimum = _Optimum(x, rss, model.jacobian(x), threshold, rss / dof)
         self.better: np.ndarray | None = None  # a point below the optimum: another basin
         self.seen: list[_Step] = []  # every re-fit so far (of any quantity)
 
@@ -219,11 +222,9 @@ class Profiler:
         """One side of ``quantity``'s interval (``sign`` −1 lower, +1 upper): the bracket of
         steps under and over the threshold narrowed until a step's ``ρ`` lies within
         ``AGREES``, or the bracket is within ``END_PRECISION`` of its far end (the end: the
-        step over, the wider), or the side is open — its range end under the threshold, or
-        the step over it held by a range: a parameter pressed against a bound the optimum
-        was not at (the ranges end it there, not the curves: Tcoat along the valley of
-        equally good coats until Ecoat reaches its bound), with the bracket under
-        ``OPEN_BRACKET`` of the quantity's range or the steps spent.
+        step over, the wider; open where the ranges end it, :meth:`_bracketed`), or the
+        side is open — its range end under the threshold, or no step over it within
+        ``MAX_STEPS``.
 
         Every point the profiles found under the threshold is in the 95 % region: the
         farthest of them along ``q`` starts the bracket (a side it reaches the range end
@@ -235,15 +236,14 @@ class Profiler:
         under = self._farthest_under(quantity, q0, sign)
         if far - under.size <= OPEN_UNIT * span:
             return ProfileSide(None, "profile", under.ratio, 0, under.point(self))
-        extent = self._extent(quantity, q0, sign, far)
         size = far if linear_end is None else min(abs(quantity.scale(linear_end) - q0), far)
         if linear_end is None or size >= LINEAR_BLIND * span:  # the linearisation sees little
             linear_end, size = None, min(far, FIRST_UNSEEN * span)  # of it: small steps first
         if size <= under.size:  # a point under the threshold lies beyond the linear end
             size = min(far, 2.0 * under.size)
-        size = min(size, max(extent, under.size))  # no farther than the ranges let it go
         over: _Step | None = None  # the nearest over it
         interpolated = False  # whether the last step was placed by interpolation
+        pending: tuple[_Step, str] | None = None  # an end, and how it was found, to confirm
         for step in range(1, MAX_STEPS + 1):
             try:  # from the farthest point under the threshold: a good fit, a good Jacobian
                 x, jac = self._refit(
@@ -257,33 +257,69 @@ class Profiler:
                 return self._unfinished(quantity, q0, sign, linear_end, under, over, step)
             found = self._step(quantity, q0, sign, x, jac)
             self._log(quantity, sign, step, size, far, found)
-            if found.ratio <= AGREES[1]:
-                ends = AGREES[0] <= found.ratio and not found.held
-                if ends and step == 1 and linear_end is not None and size < far:
-                    return ProfileSide(linear_end, "linear", found.ratio, step, found.point(self))
-                if ends:
+            if pending is not None:  # ``found`` is the step beyond an end: does it rise on?
+                end, how = pending
+                pending = None
+                if found.ratio >= CONFIRM_RATIO:
+                    return self._accepted(quantity, q0, sign, end, how, linear_end, step)
+                if found.ratio > AGREES[1]:  # it rises, less than a quadratic: the wider end
                     return self._ended(quantity, q0, sign, found, step)
-                ranges = extent < far and found.size >= (1.0 - OPEN_UNIT) * extent
-                if far - found.size <= OPEN_UNIT * span or ranges:
+                over = None  # rough, not an end: under the threshold beyond it
+            if found.ratio <= AGREES[1]:
+                if AGREES[0] <= found.ratio and pending is None and not self._beyond(found, under):
+                    how = "linear" if step == 1 and linear_end is not None else "profile"
+                    pending, size = (found, how), min(far, CONFIRM * found.size)
+                    if size <= (1.0 + OPEN_UNIT) * found.size:  # at the range's end
+                        return self._accepted(quantity, q0, sign, found, how, linear_end, step)
+                    continue
+                if far - found.size <= OPEN_UNIT * span:
                     return ProfileSide(None, "profile", found.ratio, step, found.point(self))
                 under = found if found.size > under.size else under
             elif over is None or found.size < over.size:
                 over = found
-            if over is not None and over.size - under.size <= END_PRECISION * over.size:
-                return self._bracketed(quantity, q0, sign, under, over, step)
+            if over is not None:
+                width = over.size - under.size
+                ranged = over.held and under.ratio < FLAT and width <= OPEN_PRECISION * span
+                if ranged:
+                    return ProfileSide(None, "profile", under.ratio, step, under.point(self))
+                if width <= END_PRECISION * over.size:
+                    pending, size = (over, "profile"), min(far, CONFIRM * over.size)
+                    continue
             size, interpolated = self._next_size(under, over, far, interpolated)
         if over is None:  # not closed by the curves within the steps
             return ProfileSide(None, "profile", under.ratio, MAX_STEPS, under.point(self))
         return self._bracketed(quantity, q0, sign, under, over, MAX_STEPS)
 
+    def _beyond(self, found: _Step, under: _Step) -> bool:
+        """Whether a point under the threshold lies beyond ``found`` already (its end is then
+        roughness of the misfit, not the region's edge)."""
+        return under.size > found.size
+
+    def _accepted(
+        self,
+        quantity: Quantity,
+        q0: float,
+        sign: float,
+        end: _Step,
+        how: str,
+        linear_end: float | None,
+        steps: int,
+    ) -> ProfileSide:
+        """An end whose step beyond rose on: the linear end where the first step checked
+        it, else where the re-fit placed it."""
+        if how == "linear":
+            return ProfileSide(linear_end, "linear", end.ratio, steps, end.point(self))
+        return self._ended(quantity, q0, sign, end, steps)
+
     def _bracketed(
         self, quantity: Quantity, q0: float, sign: float, under: _Step, over: _Step, steps: int
     ) -> ProfileSide:
         """The side ended between a point under the threshold and one over it: at the one
-        over (the wider interval) — or open where the one under is held by a range (a
-        parameter at a bound the optimum was not at: there the ranges end it, not the
-        curves)."""
-        if under.held:
+        over (the wider interval) — or open where the misfit was flat (``ρ`` under
+        ``FLAT``) up to where a range holds the one over (a parameter at a bound the
+        optimum was not at): there the ranges end it, not the curves (Tcoat along the
+        valley of equally good coats, until Ecoat reaches its bound)."""
+        if over.held and under.ratio < FLAT:
             return ProfileSide(None, "profile", under.ratio, steps, under.point(self))
         return self._ended(quantity, q0, sign, over, steps)
 
@@ -325,32 +361,6 @@ class Profiler:
             end = None
         return ProfileSide(end, "unchecked", None, step - 1, under.point(self))
 
-    def _extent(self, quantity: Quantity, q0: float, sign: float, far: float) -> float:
-        """How far (``|η|``) the optimum's linear prediction of the re-fits goes on this
-        side before a range holds it — a coordinate leaves the box, or a parameter the
-        optimum is not at a bound of reaches one (algebra, no runs): ``far`` where none
-        does. A side under the threshold there is open: beyond it the ranges, not the
-        curves, end it."""
-        optimum = self.optimum
-        gradient = self._gradient(quantity, optimum.x)
-        direction = _linear_shift(optimum.jacobian, gradient, sign, capped=False)
-        inside = self._sides(optimum.x) == 0
-
-        def holds(eta: float) -> bool:
-            x = optimum.x + eta * direction
-            if np.any(x < 0.0) or np.any(x > 1.0):
-                return True
-            moved = self.model.coordinates.to_unit(x)
-            return bool(np.any((bound_sides(moved) != 0) & inside))
-
-        if not holds(far):
-            return far
-        low, high = 0.0, far
-        for _ in range(EXTENT_BISECTIONS):
-            middle = 0.5 * (low + high)
-            low, high = (low, middle) if holds(middle) else (middle, high)
-        return low
-
     def _farthest_under(self, quantity: Quantity, q0: float, sign: float) -> _Step:
         """Of the optimum and every point the profiles found under the threshold, the one
         farthest along ``sign · q``."""
@@ -373,7 +383,9 @@ class Profiler:
         point = model.point(x)
         if delta < -BETTER_CHI2 * optimum.sigma2:
             self.better = point
-        pinned = (self._sides(x) != 0) & (self._sides(optimum.x) == 0)
+        pinned = _pinned(self.model.coordinates.to_unit(x)) & ~_pinned(
+            self.model.coordinates.to_unit(optimum.x)
+        )
         if quantity.name in model.problem.space.names:
             pinned[model.problem.space.names.index(quantity.name)] = False
         reached = max(sign * (quantity.scaled(point) - q0), 0.0)
@@ -395,9 +407,6 @@ class Profiler:
             found.ratio,
             ", a range holds it" if found.held else "",
         )
-
-    def _sides(self, x: np.ndarray) -> np.ndarray:
-        return bound_sides(self.model.coordinates.to_unit(x))
 
     def _next_size(
         self, under: _Step, over: _Step | None, far: float, interpolated: bool
@@ -480,6 +489,11 @@ class Profiler:
         return gradient
 
 
+def _pinned(unit: np.ndarray) -> np.ndarray:
+    """Where a point (declared unit coordinates) lies within ``PIN_UNIT`` of a bound."""
+    return (unit <= PIN_UNIT) | (unit >= 1.0 - PIN_UNIT)
+
+
 def _linear_shift(
     jac: np.ndarray, gradient: np.ndarray, eta: float, *, capped: bool = True
 ) -> np.ndarray:
@@ -510,14 +524,17 @@ def _tangent_step(
     residual: np.ndarray, jac: np.ndarray, gradient: np.ndarray, x: np.ndarray
 ) -> np.ndarray:
     """The Gauss–Newton step ``d`` that minimises ``‖r + J d‖`` with ``g·d = 0`` (a heavy
-    row), within the box and ``±TRUST`` of ``x``."""
-    weight = (
-        1e3 * max(float(np.linalg.norm(jac)), 1e-12) / max(float(np.linalg.norm(gradient)), 1e-300)
-    )
-    matrix = np.vstack([jac, weight * gradient])
+    row), damped (Levenberg–Marquardt, ``DAMPING`` of ``‖J‖²``: along directions the
+    curves hardly see, the undamped step leapt to its bounds, and off the valley), within
+    the box and ``±TRUST`` of ``x``."""
+    scale = max(float(np.linalg.norm(jac)), 1e-12)
+    weight = 1e3 * scale / max(float(np.linalg.norm(gradient)), 1e-300)
+    damping = math.sqrt(DAMPING) * scale * np.eye(x.size)
+    matrix = np.vstack([jac, weight * gradient, damping])
+    target = np.concatenate([-residual, [0.0], np.zeros(x.size)])
     low = np.maximum(-x, -TRUST)
     high = np.maximum(np.minimum(1.0 - x, TRUST), low + 1e-15)
-    return lsq_linear(matrix, np.append(-residual, 0.0), bounds=(low, high), method="bvls").x
+    return lsq_linear(matrix, target, bounds=(low, high), method="bvls").x
 
 
 def profile(

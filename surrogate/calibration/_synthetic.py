@@ -23,6 +23,7 @@ __all__ = [
     "HIDDEN_EFFECT_TESTS",
     "anisotropy_basin_set",
     "calibration_sets",
+    "coverage_sets",
     "hidden_effect_tests",
     "synthetic_measurements",
     "write_calibration_study",
@@ -170,6 +171,65 @@ def anisotropy_basin_set() -> dict[str, Any]:
         1,
     )
     return {**case, "surrogate_trials": 300}
+
+
+# Two bending lengths (benchmarks/coverage.py): the short one reaches the plateau sooner.
+TWO_LENGTH_TESTS = (
+    {"test_id": "a1", "tension_n": 0.0, "bending_length_mm": 10.0},
+    {"test_id": "a2", "tension_n": 0.0, "bending_length_mm": 10.0},
+    {"test_id": "b1", "tension_n": 20.0, "bending_length_mm": 15.0},
+    {"test_id": "b2", "tension_n": 20.0, "bending_length_mm": 15.0},
+)
+PAPER_RANGES = {"ecoat_gpa": (0.5, 4.0), "scoat_gpa": (0.05, 0.4), "tcoat_mm": (0.01, 0.1)}
+NEAR_BOUND = 0.03  # a coverage set's truth "near a bound": this share of the log range inside
+
+
+def coverage_sets(count: int = 120, *, seed: int = 0) -> list[dict[str, Any]]:
+    """The data sets of ``benchmarks/coverage.py``, as :func:`calibration_sets` gives each:
+    truths over the whole coating space (a Latin hypercube of the log ranges, every
+    fifth with one parameter ``NEAR_BOUND`` inside a bound), one bending length (10 mm)
+    or two (10 and 15 mm), every third with the ``tension`` effect in the truth and the
+    model, noise 0.02–0.08 N, each set its own noise seed and a study seed of 0–3
+    (``study_seed``)."""
+    from scipy.stats import qmc
+
+    unit = qmc.LatinHypercube(d=6, seed=seed).random(count)
+    names = list(PAPER_RANGES)
+    sets = []
+    for index, u in enumerate(unit):
+        share = NEAR_BOUND + (1 - 2 * NEAR_BOUND) * u[:3]
+        if index % 5 == 4:  # one parameter near a bound
+            k = index // 5 % 3
+            share[k] = NEAR_BOUND if u[3] < 0.5 else 1 - NEAR_BOUND
+        coating = {
+            name: float(np.exp(np.log(low) + share[k] * np.log(high / low)))
+            for k, (name, (low, high)) in enumerate(PAPER_RANGES.items())
+        }
+        coating = {name: round(coating[name], 5) for name in names}
+        tension = index % 3 == 2
+        hidden = (
+            {
+                "tension": {
+                    "k_e": round(float(0.002 + 0.008 * u[4]), 5),
+                    "k_s": round(float(0.002 + 0.008 * u[5]), 5),
+                }
+            }
+            if tension
+            else {}
+        )
+        tests = TWO_LENGTH_TESTS if index % 2 else BASE_TESTS
+        noise = round(float(0.02 * 4.0 ** u[3]), 4)
+        case = _set(
+            f"cover-{index:03d}",
+            coating,
+            hidden,
+            ["tension"] if tension else [],
+            tests,
+            noise,
+            1000 + index,
+        )
+        sets.append({**case, "study_seed": index % 4})
+    return sets
 
 
 def calibration_sets() -> list[dict[str, Any]]:
