@@ -33,7 +33,7 @@ The scheme's rules are :mod:`surrogate.solvers._fidelity`'s. Here:
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -237,7 +237,7 @@ class CorrectedCalibration(CalibrationLoop):
             self._profile_best()
 
     # -- what the curves determine: profiles on the corrected model, ends verified ------------
-    def _profile_best(self) -> None:
+    def _profile_best(self, elsewhere: Sequence[np.ndarray] = ()) -> None:
         """The profiles run on the corrected model (built-in runs) and their ends are
         verified by the expensive solver (:meth:`verified_ends`); not where the correction
         was dropped (no cheaper model is exact enough there: the linear intervals stand,
@@ -245,7 +245,7 @@ class CorrectedCalibration(CalibrationLoop):
         if self.dropped is not None:
             self._say("the correction was dropped: the intervals are the linear ones, unchecked")
             return
-        super()._profile_best()
+        super()._profile_best(elsewhere)
 
     def profile_runs(self) -> SolverRuns:
         return self.corrected_runs(self.correction)

@@ -91,7 +91,7 @@ VALLEY_STEP = 0.25  # the valley starts: a quarter of a range along the least de
 BASIN_STEPS = (0.25, 0.5)
 REGIONS = 2  # the surrogate's best points in other regions, at most
 REGION_UNIT = 0.2  # …each this far from every optimum found and from each other
-PROFILE_SHARE = 1.0  # the profiles' runs: at most this share of the calibration's again
+PROFILE_SHARE = 2.5  # the profiles' runs: at most this share of the calibration's again
 PROFILE_ROUNDS = 2  # profiles at most: a second where the first found a better point
 
 _LOG = logging.getLogger(__name__)
@@ -431,13 +431,35 @@ class CalibrationLoop:
                 self._local(residuals, record)
         self._search_basins(model, surrogate_trials)
         if self.intervals:
-            self._profile_best()
+            self._profile_best(self._elsewhere(model, surrogate_trials))
 
     # -- what the curves determine (:mod:`._profile`) ------------------------------------------
-    def _profile_best(self) -> None:
+    def _elsewhere(self, model: CurveSurrogate, surrogate_trials: int) -> list[np.ndarray]:
+        """Points a profile may not reach from the optimum that the region may hold: the
+        surrogate's best in other regions (:meth:`_regions`), polished on it and run — a
+        run a condition group each (a coat whose Mp and Tcoat trade along a curved tube:
+        the truth 78 % above the optimum's Mp fitted as well; the profile from the optimum
+        bounded Mp to ±0.13 %) — where the best fit is a verified local optimum. One
+        better than it is another basin, fitted locally."""
+        if not self.converged_at_best() or not self.verifications_left():
+            return []
+        found = []
+        for start in self._regions(model, surrogate_trials):
+            theta, predicted = self._polish(model, start.theta)
+            out = self.runs.run(*self.problem.at_every_group(theta))
+            if any(o is None for o in out):
+                continue
+            curves = np.array([o.curve for o in out if o is not None])
+            self._try_basin(theta, predicted, f"{start.why}, polished on the surrogate", curves)
+            found.append(theta)
+        return found
+
+    def _profile_best(self, elsewhere: Sequence[np.ndarray] = ()) -> None:
         """The profile intervals of the best fit, where it is a verified local optimum
         (``determination``); a profile point below the optimum (another basin) is fitted
-        locally and profiled again, at most ``PROFILE_ROUNDS`` times."""
+        locally and profiled again, at most ``PROFILE_ROUNDS`` times. Every verified point
+        and ``elsewhere`` under the threshold is in the region too (the profiles start
+        from the farthest of them)."""
         for _ in range(PROFILE_ROUNDS):
             fit = self.best_fit()
             if fit is None or not self.converged_at_best():
@@ -453,7 +475,8 @@ class CalibrationLoop:
             self._say(
                 f"profiling {len(quantities)} quantities, within {limit - before} solver runs"
             )
-            profiles, better = profile(model, fit, quantities)
+            known = [v.theta for v in self.verified] + list(elsewhere)
+            profiles, better = profile(model, fit, quantities, known=known)
             spent = runs.calls - before
             self.profiled_runs(runs)
             if better is not None and self.follow_better(better):

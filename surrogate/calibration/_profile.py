@@ -78,6 +78,7 @@ FLAT = 0.1  # ρ under this up to where a range holds the step over: the ranges 
 OPEN_PRECISION = 0.1  # …found to within this share of the quantity's range
 CONFIRM = 2.0  # an end is confirmed by a re-fit this much farther out…
 CONFIRM_RATIO = 2.0  # …whose ρ reaches this (a quadratic rise gives 4): else it was roughness
+CONFIRM_EVALUATIONS = 1  # …at the linear prediction of the re-fit there (it can only be higher)
 END_PRECISION = 0.1  # a bracket this narrow (share of its far step): the end, the far step
 MAX_STEPS = 8  # constrained re-fits of one side, at most
 BETTER_CHI2 = 1.0  # a profile point this many s² below the optimum: another basin
@@ -89,7 +90,9 @@ FD_STEP_Q = 1e-6  # differences of q(x) (algebra, no runs)
 LINEAR_BLIND = 0.5  # a linear end this share of the range away: the linearisation is blind
 FIRST_UNSEEN = 0.05  # the first step of a side the curves do not see at the optimum: this
 # share of the quantity's range (a coat's plastic moment where none yields: zero slope there)
-NULL_SINGULAR = 1e-10  # a singular value of J below this share of the largest: not seen
+NULL_SINGULAR = 1e-3  # a singular value of J below this share of the largest: not seen by
+# the linear prediction of a re-fit (the valley of equally good coats: its 1e-5 share of a
+# well-determined Mp's gradient, the differences' noise, had sent the prediction along it)
 UNSEEN_SHARE = 0.1  # …and a share of g² this large along such directions: moved along them
 
 
@@ -118,6 +121,9 @@ class Quantity:
     @property
     def range_scaled(self) -> tuple[float, float]:
         return (math.log(self.low), math.log(self.high)) if self.log else (self.low, self.high)
+
+
+_ANY = Quantity("", lambda theta: 0.0, False, 0.0, 1.0)  # a point judged for no quantity
 
 
 @dataclass(frozen=True)
@@ -210,6 +216,14 @@ class Profiler:
         self.better: np.ndarray | None = None  # a point below the optimum: another basin
         self.seen: list[_Step] = []  # every re-fit so far (of any quantity)
 
+    def know(self, points: Sequence[np.ndarray]) -> None:
+        """Parameter points whose runs are done (no new runs: the result cache holds
+        them) judged like re-fits and kept in ``seen``: each one under the threshold is in
+        the region, whatever a profile from the optimum reaches."""
+        for theta in points:
+            x = self.model.pin(np.asarray(theta, dtype=float))
+            self._step(_ANY, 0.0, 1.0, x, self.optimum.jacobian)
+
     def profile(self, quantity: Quantity, linear: tuple[float | None, float | None]) -> Profile:
         """Both sides of ``quantity``'s interval; ``linear``: the linear interval's ends
         (declared units; None where it has none: the first step is then the range's end)."""
@@ -246,13 +260,14 @@ class Profiler:
         pending: tuple[_Step, str] | None = None  # an end, and how it was found, to confirm
         for step in range(1, MAX_STEPS + 1):
             try:  # from the farthest point under the threshold: a good fit, a good Jacobian
-                x, jac = self._refit(
-                    quantity,
-                    q0 + sign * size,
-                    under.x,
-                    under.jac,
-                    FIRST_EVALUATIONS if step == 1 else NUISANCE_EVALUATIONS,
+                evaluations = (
+                    CONFIRM_EVALUATIONS
+                    if pending is not None
+                    else FIRST_EVALUATIONS
+                    if step == 1
+                    else NUISANCE_EVALUATIONS
                 )
+                x, jac = self._refit(quantity, q0 + sign * size, under.x, under.jac, evaluations)
             except BudgetSpent:
                 return self._unfinished(quantity, q0, sign, linear_end, under, over, step)
             found = self._step(quantity, q0, sign, x, jac)
@@ -538,10 +553,17 @@ def _tangent_step(
 
 
 def profile(
-    model: ResidualModel, fit: LocalFit, quantities: Sequence[tuple[Quantity, Any]]
+    model: ResidualModel,
+    fit: LocalFit,
+    quantities: Sequence[tuple[Quantity, Any]],
+    *,
+    known: Sequence[np.ndarray] = (),
 ) -> tuple[list[Profile], np.ndarray | None]:
     """Profiles of ``quantities`` (each with its linear interval's ends) about ``fit``, and
-    a point below the optimum where one was found (another basin), else None."""
+    a point below the optimum where one was found (another basin), else None. ``known``:
+    parameter points whose runs are done (verified points), in the region where under
+    the threshold."""
     profiler = Profiler(model, fit)
+    profiler.know(known)
     found = [profiler.profile(quantity, linear) for quantity, linear in quantities]
     return found, profiler.better
