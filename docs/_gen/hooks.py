@@ -133,7 +133,11 @@ def _arguments_table(parser: argparse.ArgumentParser, skip_subcommands: bool = F
         if action.help == argparse.SUPPRESS:
             continue
         if action.option_strings:
-            metavar = "" if action.nargs == 0 else f" {formatter._format_args(action, action.dest.upper())}"
+            metavar = (
+                ""
+                if action.nargs == 0
+                else f" {formatter._format_args(action, action.dest.upper())}"
+            )
             name = ", ".join(f"`{option}{metavar}`" for option in action.option_strings)
         else:
             name = f"`{formatter._format_args(action, action.dest)}`"
@@ -171,16 +175,20 @@ def study_keys_reference() -> str:
         if section == "solver":
             for kind in available_solvers():
                 solver = get_solver(kind)
-                parts.append(f"### `kind = \"{kind}\"`\n")
+                parts.append(f'### `kind = "{kind}"`\n')
                 if not solver.settings_keys:
                     parts.append("No further settings.\n")
                     continue
                 rows_text = []
                 for key in solver.settings_keys:
                     if key not in SOLVER_SETTINGS:
-                        log.warning("solver setting %s.%s has no meaning in SOLVER_SETTINGS", kind, key)
+                        log.warning(
+                            "solver setting %s.%s has no meaning in SOLVER_SETTINGS", kind, key
+                        )
                     identity = "no" if key in solver.run_settings else "yes"
-                    rows_text.append(f"| `{key}` | {identity} | {_cell(SOLVER_SETTINGS.get(key, ''))} |")
+                    rows_text.append(
+                        f"| `{key}` | {identity} | {_cell(SOLVER_SETTINGS.get(key, ''))} |"
+                    )
                 parts.append(
                     "| key | names the run (result cache) | meaning |\n|---|---|---|\n"
                     + "\n".join(rows_text)
@@ -228,11 +236,9 @@ def json_reference() -> str:
         for key in keys:
             type_text = str(hints.get(key, "list[float]")).replace("|", "or")
             type_text = type_text.replace("np.ndarray", "list[float]")
-            lines.append(f"| `{key}` | `{type_text}` | {_cell(_rst(described.get(key, '')))} |")
+            meaning = described.get(key, "").rstrip(";,") + ("." if key in described else "")
+            lines.append(f"| `{key}` | `{type_text}` | {_cell(_rst(meaning.replace('..', '.')))} |")
         parts.append("\n".join(lines) + "\n")
-        body = _rst(doc.split("\n\n", 1)[1]) if "\n\n" in doc else ""
-        if body and "Attributes\n---" not in doc:
-            parts.append(textwrap.indent(body, "> ").replace("> \n", ">\n") + "\n")
     return "\n".join(parts)
 
 
@@ -289,29 +295,45 @@ def exit_codes_reference() -> str:
     from surrogate import _cli
 
     rows = [
-        ("0", "the command did what it was asked (a calibration that did not converge is "
-              "still 0: its `status` says so)"),
-        (str(_cli.EXIT_USAGE), "bad input: an option, a value out of range, NaN, a malformed "
-                               "CSV or study file, an unusable storage; one line on stderr, "
-                               "nothing written"),
-        (str(_cli.EXIT_SOLVER), "a full-solver run failed (the line names the angle or the "
-                                "solver's reason); `run --jobs N`: runs still open after four "
-                                "rounds of local worker processes"),
+        (
+            "0",
+            "the command did what it was asked (a calibration that did not converge is "
+            "still 0: its `status` says so)",
+        ),
+        (
+            str(_cli.EXIT_USAGE),
+            "bad input: an option, a value out of range, NaN, a malformed "
+            "CSV or study file, an unusable storage; one line on stderr, "
+            "nothing written",
+        ),
+        (
+            str(_cli.EXIT_SOLVER),
+            "a full-solver run failed (the line names the angle or the "
+            "solver's reason); `run --jobs N`: runs still open after four "
+            "rounds of local worker processes",
+        ),
         (str(128 + int(signal.SIGINT)), "interrupted by Ctrl-C (SIGINT)"),
-        (str(128 + int(signal.SIGTERM)), "stopped by SIGTERM (what schedulers send); the "
-                                         "finished runs are kept, the same command resumes"),
+        (
+            str(128 + int(signal.SIGTERM)),
+            "stopped by SIGTERM (what schedulers send); the "
+            "finished runs are kept, the same command resumes",
+        ),
     ]
-    return "| exit code | meaning |\n|---|---|\n" + "\n".join(
-        f"| `{code}` | {text} |" for code, text in rows
-    ) + "\n"
+    return (
+        "| exit code | meaning |\n|---|---|\n"
+        + "\n".join(f"| `{code}` | {text} |" for code, text in rows)
+        + "\n"
+    )
 
 
 def effects_reference() -> str:
     """The built-in effects: name, parameters (bounds, off value, unit), conditions read."""
     from surrogate.effects import available_effects, get_effect
 
-    lines = ["| effect | parameters (low – high, off, unit) | reads | what it does |",
-             "|---|---|---|---|"]
+    lines = [
+        "| effect | parameters (low – high, off, unit) | reads | what it does |",
+        "|---|---|---|---|",
+    ]
     for name in available_effects():
         effect = get_effect(name)
         params = "<br>".join(

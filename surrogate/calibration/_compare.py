@@ -70,6 +70,11 @@ class CompareResult:
     ``calibration``: for the stored calibration (no ``params`` given), its
     ``status``, ``misfit`` and ``determination`` (see :class:`CalibrationResult`);
     ``None`` for given parameters.
+
+    ``params`` and ``effects`` are the model compared; ``rmse_n`` its RMSE over every
+    measured point, ``noise_n`` the noise level and ``rmse_over_noise`` their ratio;
+    ``study`` the calibration study the figures are attached to; ``message`` the summary
+    line the command prints.
     """
 
     params: dict[str, float]

@@ -118,6 +118,13 @@ class DiagnosisResult:
     current model's calibration dropped the correction; the candidates are ranked on it
     all the same, and only a confirmed effect is named). ``solver_calls`` counts the
     expensive runs.
+
+    ``rmse_n``, ``heldout_rmse_n`` and ``noise_n`` are the current model's RMSE, its
+    leave-one-test-out RMSE and the noise level; ``systematic`` whether the F-test
+    against the noise rejects (``p_value``); ``where`` the tests, angle bands and
+    condition values where it fails; ``unexplained`` the column the residual follows
+    when no effect of the library explains it (else None); ``verdict`` the sentence the
+    command prints; ``effects`` the current model's effects.
     """
 
     rmse_n: float

@@ -1,0 +1,257 @@
+"""The examples of the manual and the README, run as tests.
+
+The convention (docs/reference/examples.md says it to writers):
+
+- A fenced block marked ```` ```console ```` is one command: its first line is
+  ``$ command`` (continued on lines ending in ``\\``), the rest is the output shown.
+  It is run with ``bash`` in a temporary copy of the repository's ``studies/``, ``data/``
+  and ``examples/`` (one copy a page, the blocks in page order, so a page's later
+  commands see what its earlier ones stored), with ``.venv/bin`` first on ``PATH``;
+  stdout and stderr are read together.
+- An HTML comment on the line before the block says what is checked::
+
+      <!-- check: exit=2 rtol=0.05 keys: "target met" "F60 = 10.02 N" -->
+
+  ``exit`` (default 0) is the expected exit code. With ``keys``, each quoted key line
+  must appear in the shown output *and* in the real output, in that order; without, every
+  shown output line must, in order, except lines that are ``…``. Lines are compared with
+  whitespace collapsed and numbers equal within ``rtol`` (default 0.02), so a
+  last-digit difference between machines is no failure but a changed result is.
+  ``<!-- check: skip -->`` leaves a block out (say why next to it).
+- A ```` ```python ```` block runs (in the same temporary folder, one namespace a page, in
+  page order) and must not raise; a ```` ```pycon ```` block is a doctest
+  (``>>>`` lines and their output; ELLIPSIS and NORMALIZE_WHITESPACE on).
+- Any other block (``bash``, ``text``, ``toml``) is shown, not run: use them for
+  commands that need what a test machine lacks (LS-DYNA, a PostgreSQL server, a browser).
+- A page whose examples take long says ``<!-- check-page: slow -->``; its test is marked
+  slow (CI runs it: CI runs the whole suite).
+"""
+
+from __future__ import annotations
+
+import doctest
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+COPIED = ("studies", "data", "examples")
+_FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```\s*$", re.DOTALL | re.MULTILINE)
+_CHECK = re.compile(r"<!--\s*check:(.*?)-->\s*$")
+_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+ELLIPSIS_LINES = {"…", "...", "[…]"}
+
+
+@dataclass
+class Block:
+    """One runnable fenced block of a page."""
+
+    language: str
+    text: str
+    line: int  # where it starts in the page (1-based)
+    exit: int = 0
+    rtol: float = 0.02
+    keys: list[str] | None = None
+    skip: bool = False
+
+    @property
+    def command(self) -> str:
+        lines = self.text.splitlines()
+        command = [lines[0].removeprefix("$ ")]
+        for line in lines[1:]:
+            if not command[-1].endswith("\\"):
+                break
+            command.append(line)
+        return "\n".join(command)
+
+    @property
+    def shown(self) -> list[str]:
+        """The output lines the page shows under the command."""
+        return self.text.splitlines()[len(self.command.splitlines()) :]
+
+
+@dataclass
+class Page:
+    path: Path
+    blocks: list[Block] = field(default_factory=list)
+    slow: bool = False
+
+
+def parse_page(path: Path) -> Page:
+    """The runnable blocks of a Markdown page, with their check options."""
+    text = path.read_text(encoding="utf-8")
+    page = Page(path, slow="<!-- check-page: slow -->" in text)
+    for match in _FENCE.finditer(text):
+        language, body = match.group(1), match.group(2)
+        if language not in ("console", "python", "pycon"):
+            continue
+        before = text[: match.start()].rstrip("\n").rsplit("\n", 1)[-1]
+        block = Block(language, body, text[: match.start()].count("\n") + 1)
+        check = _CHECK.search(before)
+        if check:
+            _options(block, check.group(1))
+        if language == "console" and not body.startswith("$ "):
+            raise ValueError(f"{path}:{block.line}: a console block starts with '$ command'")
+        page.blocks.append(block)
+    return page
+
+
+def _options(block: Block, text: str) -> None:
+    head, _, keys = text.partition("keys:")
+    for word in shlex.split(head):
+        name, _, value = word.partition("=")
+        if name == "skip":
+            block.skip = True
+        elif name == "exit":
+            block.exit = int(value)
+        elif name == "rtol":
+            block.rtol = float(value)
+        else:
+            raise ValueError(f"unknown check option {word!r} (exit=, rtol=, skip, keys:)")
+    if keys.strip():
+        block.keys = shlex.split(keys)
+
+
+def workspace(root: Path) -> Path:
+    """A temporary copy of what the examples read and write (nothing in the checkout)."""
+    for name in COPIED:
+        shutil.copytree(
+            REPO / name,
+            root / name,
+            ignore=shutil.ignore_patterns(
+                "*.db", ".solver-cache", "*-compare", "*-artifacts", "*-report.html", "__pycache__"
+            ),
+        )
+    return root
+
+
+def environment() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    env["COLUMNS"] = "100"
+    env.pop("PYTHONPATH", None)
+    return env
+
+
+def run_console(block: Block, cwd: Path) -> str:
+    """Run the block's command; return its output, or raise AssertionError saying why."""
+    done = subprocess.run(
+        ["bash", "-c", block.command],
+        cwd=cwd,
+        env=environment(),
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    output = done.stdout + done.stderr
+    if done.returncode != block.exit:
+        raise AssertionError(
+            f"line {block.line}: `{block.command}` exited {done.returncode}, "
+            f"expected {block.exit}:\n{output[-3000:]}"
+        )
+    return output
+
+
+def compare(block: Block, output: str) -> None:
+    """Each expected line (the keys, else every shown line) in the real output, in order."""
+    shown = [line for line in block.shown if line.strip() not in ELLIPSIS_LINES]
+    if block.keys is not None:
+        missing = [key for key in block.keys if not _find_in_order(shown, [key], block.rtol)[0]]
+        if missing:
+            raise AssertionError(
+                f"line {block.line}: key(s) {missing} are not in the output the page shows"
+            )
+        expected = block.keys
+    else:
+        expected = [line for line in shown if line.strip()]
+    found, missing_line = _find_in_order(output.splitlines(), expected, block.rtol)
+    if not found:
+        raise AssertionError(
+            f"line {block.line}: `{block.command}`: expected {missing_line!r} "
+            f"(in this order, numbers within rtol={block.rtol}), got:\n{output[-4000:]}"
+        )
+
+
+def _find_in_order(lines: list[str], expected: list[str], rtol: float) -> tuple[bool, str]:
+    position = 0
+    for want in expected:
+        for index in range(position, len(lines)):
+            if matches(want, lines[index], rtol):
+                position = index + 1
+                break
+        else:
+            return False, want
+    return True, ""
+
+
+def matches(want: str, line: str, rtol: float) -> bool:
+    """Whether ``line`` contains ``want``, whitespace collapsed, numbers within ``rtol``."""
+    want, line = " ".join(want.split()), " ".join(line.split())
+    numbers = _NUMBER.findall(want)
+    literals = _NUMBER.split(want)
+    pattern = "".join(
+        re.escape(literal) + (f"({_NUMBER.pattern})" if index < len(numbers) else "")
+        for index, literal in enumerate(literals)
+    )
+    for found in re.finditer(pattern, line):
+        pairs = zip(numbers, found.groups(), strict=True)
+        if all(_close(float(a), float(b), rtol) for a, b in pairs):
+            return True
+    return False
+
+
+def _close(want: float, got: float, rtol: float) -> bool:
+    return abs(want - got) <= rtol * max(abs(want), abs(got)) or want == got
+
+
+def run_python(blocks: list[Block], cwd: Path) -> None:
+    """The page's python blocks (exec) and pycon blocks (doctest), in one namespace."""
+    namespace: dict[str, object] = {"__name__": "__docs__"}
+    here = Path.cwd()
+    os.chdir(cwd)
+    sys.path.insert(0, str(cwd / "examples"))
+    try:
+        for block in blocks:
+            if block.language == "python":
+                try:
+                    exec(compile(block.text, f"<block at line {block.line}>", "exec"), namespace)
+                except Exception as error:
+                    raise AssertionError(f"line {block.line}: {error!r}") from error
+            else:
+                test = doctest.DocTestParser().get_doctest(
+                    block.text, namespace, f"line {block.line}", None, block.line
+                )
+                runner = doctest.DocTestRunner(
+                    optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE
+                )
+                report: list[str] = []
+                runner.run(test, out=report.append, clear_globs=False)
+                if runner.failures:
+                    raise AssertionError("".join(report))
+    finally:
+        os.chdir(here)
+        sys.path.remove(str(cwd / "examples"))
+
+
+def check_page(path: Path, tmp: Path) -> int:
+    """Run every example of ``path`` in a fresh workspace; return how many ran."""
+    page = parse_page(path)
+    cwd = workspace(tmp)
+    ran = 0
+    python: list[Block] = []
+    for block in page.blocks:
+        if block.skip:
+            continue
+        if block.language == "console":
+            compare(block, run_console(block, cwd))
+        else:
+            python.append(block)
+        ran += 1
+    if python:
+        run_python(python, cwd)
+    return ran
