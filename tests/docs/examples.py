@@ -144,11 +144,12 @@ def run_console(block: Block, cwd: Path) -> str:
         ["bash", "-c", block.command],
         cwd=cwd,
         env=environment(),
-        capture_output=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,  # one stream: progress lines stay where they were printed
         text=True,
         timeout=900,
     )
-    output = done.stdout + done.stderr
+    output = done.stdout
     if done.returncode != block.exit:
         raise AssertionError(
             f"line {block.line}: `{block.command}` exited {done.returncode}, "
@@ -178,12 +179,16 @@ def compare(block: Block, output: str) -> None:
 
 
 def _find_in_order(lines: list[str], expected: list[str], rtol: float) -> tuple[bool, str]:
-    position = 0
+    """Whether each of ``expected`` is found after the one before (on a later line or
+    further along the same one); else the first one not found."""
+    line, column = 0, 0
     for want in expected:
-        for index in range(position, len(lines)):
-            if matches(want, lines[index], rtol):
-                position = index + 1
+        while line < len(lines):
+            end = search(want, lines[line], rtol, column)
+            if end >= 0:
+                column = end
                 break
+            line, column = line + 1, 0
         else:
             return False, want
     return True, ""
@@ -191,6 +196,11 @@ def _find_in_order(lines: list[str], expected: list[str], rtol: float) -> tuple[
 
 def matches(want: str, line: str, rtol: float) -> bool:
     """Whether ``line`` contains ``want``, whitespace collapsed, numbers within ``rtol``."""
+    return search(want, line, rtol, 0) >= 0
+
+
+def search(want: str, line: str, rtol: float, start: int) -> int:
+    """Where ``want`` ends in ``line`` (whitespace collapsed) from ``start`` on, or -1."""
     want, line = " ".join(want.split()), " ".join(line.split())
     numbers = _NUMBER.findall(want)
     literals = _NUMBER.split(want)
@@ -198,20 +208,19 @@ def matches(want: str, line: str, rtol: float) -> bool:
         re.escape(literal) + (f"({_NUMBER.pattern})" if index < len(numbers) else "")
         for index, literal in enumerate(literals)
     )
-    for found in re.finditer(pattern, line):
+    for found in re.compile(pattern).finditer(line, start):
         pairs = zip(numbers, found.groups(), strict=True)
         if all(_close(float(a), float(b), rtol) for a, b in pairs):
-            return True
-    return False
+            return found.end()
+    return -1
 
 
 def _close(want: float, got: float, rtol: float) -> bool:
     return abs(want - got) <= rtol * max(abs(want), abs(got)) or want == got
 
 
-def run_python(blocks: list[Block], cwd: Path) -> None:
-    """The page's python blocks (exec) and pycon blocks (doctest), in one namespace."""
-    namespace: dict[str, object] = {"__name__": "__docs__"}
+def run_python(blocks: list[Block], cwd: Path, namespace: dict[str, object]) -> None:
+    """Python blocks (exec) and pycon blocks (doctest) in ``namespace``, the page's."""
     here = Path.cwd()
     os.chdir(cwd)
     sys.path.insert(0, str(cwd / "examples"))
@@ -243,15 +252,13 @@ def check_page(path: Path, tmp: Path) -> int:
     page = parse_page(path)
     cwd = workspace(tmp)
     ran = 0
-    python: list[Block] = []
+    namespace: dict[str, object] = {"__name__": "__docs__"}
     for block in page.blocks:
         if block.skip:
             continue
         if block.language == "console":
             compare(block, run_console(block, cwd))
         else:
-            python.append(block)
+            run_python([block], cwd, namespace)
         ran += 1
-    if python:
-        run_python(python, cwd)
     return ran
