@@ -17,7 +17,8 @@ The convention (docs/reference/examples.md says it to writers):
   shown output line must, in order, except lines that are ``…``. Lines are compared with
   whitespace collapsed and numbers equal within ``rtol`` (default 0.02), so a
   last-digit difference between machines is no failure but a changed result is.
-  ``<!-- check: skip -->`` leaves a block out (say why next to it).
+  ``<!-- check: skip -->`` leaves a block out (say why next to it); ``needs=ccx`` skips it
+  where the program is not installed, but not in CI (``CI=true``), where it must be.
 - A ```` ```python ```` block runs (in the same temporary folder, one namespace a page, in
   page order) and must not raise; a ```` ```pycon ```` block is a doctest
   (``>>>`` lines and their output; ELLIPSIS and NORMALIZE_WHITESPACE on).
@@ -40,7 +41,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-COPIED = ("studies", "data", "examples")
+COPIED = ("studies", "data", "examples", "tests/solvers/fixtures")  # the last: stand-ins
 _FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```\s*$", re.DOTALL | re.MULTILINE)
 _CHECK = re.compile(r"<!--\s*check:(.*?)-->\s*$")
 _NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
@@ -58,6 +59,7 @@ class Block:
     rtol: float = 0.02
     keys: list[str] | None = None
     skip: bool = False
+    needs: list[str] = field(default_factory=list)  # programs it runs (e.g. ccx)
 
     @property
     def command(self) -> str:
@@ -109,6 +111,8 @@ def _options(block: Block, text: str) -> None:
             block.skip = True
         elif name == "exit":
             block.exit = int(value)
+        elif name == "needs":
+            block.needs = value.split(",")
         elif name == "rtol":
             block.rtol = float(value)
         else:
@@ -247,6 +251,14 @@ def run_python(blocks: list[Block], cwd: Path, namespace: dict[str, object]) -> 
         sys.path.remove(str(cwd / "examples"))
 
 
+def _missing(programs: list[str]) -> bool:
+    """Whether a program the block runs is not installed (never so in CI: it must be)."""
+    absent = [p for p in programs if shutil.which(p) is None]
+    if absent and os.environ.get("CI") == "true":
+        raise AssertionError(f"{', '.join(absent)} not installed (scripts/system-packages.sh)")
+    return bool(absent)
+
+
 def check_page(path: Path, tmp: Path) -> int:
     """Run every example of ``path`` in a fresh workspace; return how many ran."""
     page = parse_page(path)
@@ -254,7 +266,7 @@ def check_page(path: Path, tmp: Path) -> int:
     ran = 0
     namespace: dict[str, object] = {"__name__": "__docs__"}
     for block in page.blocks:
-        if block.skip:
+        if block.skip or _missing(block.needs):
             continue
         if block.language == "console":
             compare(block, run_console(block, cwd))
