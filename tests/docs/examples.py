@@ -1,6 +1,6 @@
 """The examples of the manual and the README, run as tests.
 
-The convention (docs/reference/examples.md says it to writers):
+The convention, for whoever writes a page of the manual or the README:
 
 - A fenced block marked ```` ```console ```` is one command: its first line is
   ``$ command`` (continued on lines ending in ``\\``), the rest is the output shown.
