@@ -19,9 +19,10 @@ The convention, for whoever writes a page of the manual or the README:
   last-digit difference between machines is no failure but a changed result is.
   ``<!-- check: skip -->`` leaves a block out (say why next to it); ``needs=ccx`` skips it
   where the program is not installed, but not in CI (``CI=true``), where it must be.
-- A ```` ```python ```` block runs (in the same temporary folder, one namespace a page, in
-  page order) and must not raise; a ```` ```pycon ```` block is a doctest
-  (``>>>`` lines and their output; ELLIPSIS and NORMALIZE_WHITESPACE on).
+- A ```` ```python ```` block runs (in the same temporary folder, in page order, each block
+  in a fresh Python process: a block imports what it uses) and must not raise; a
+  ```` ```pycon ```` block is a doctest (``>>>`` lines and their output; ELLIPSIS and
+  NORMALIZE_WHITESPACE on).
 - Any other block (``bash``, ``text``, ``toml``) is shown, not run: use them for
   commands that need what a test machine lacks (LS-DYNA, a PostgreSQL server, a browser).
 - A page whose examples take long says ``<!-- check-page: slow -->``; its test is marked
@@ -30,7 +31,6 @@ The convention, for whoever writes a page of the manual or the README:
 
 from __future__ import annotations
 
-import doctest
 import os
 import re
 import shlex
@@ -223,32 +223,38 @@ def _close(want: float, got: float, rtol: float) -> bool:
     return abs(want - got) <= rtol * max(abs(want), abs(got)) or want == got
 
 
-def run_python(blocks: list[Block], cwd: Path, namespace: dict[str, object]) -> None:
-    """Python blocks (exec) and pycon blocks (doctest) in ``namespace``, the page's."""
-    here = Path.cwd()
-    os.chdir(cwd)
-    sys.path.insert(0, str(cwd / "examples"))
-    try:
-        for block in blocks:
-            if block.language == "python":
-                try:
-                    exec(compile(block.text, f"<block at line {block.line}>", "exec"), namespace)
-                except Exception as error:
-                    raise AssertionError(f"line {block.line}: {error!r}") from error
-            else:
-                test = doctest.DocTestParser().get_doctest(
-                    block.text, namespace, f"line {block.line}", None, block.line
-                )
-                runner = doctest.DocTestRunner(
-                    optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE
-                )
-                report: list[str] = []
-                runner.run(test, out=report.append, clear_globs=False)
-                if runner.failures:
-                    raise AssertionError("".join(report))
-    finally:
-        os.chdir(here)
-        sys.path.remove(str(cwd / "examples"))
+_RUNNER = """
+import doctest, sys
+language, path = sys.argv[1], sys.argv[2]
+text = open(path, encoding="utf-8").read()
+sys.path.insert(0, "examples")
+if language == "python":
+    exec(compile(text, "<block>", "exec"), {"__name__": "__docs__"})
+else:
+    test = doctest.DocTestParser().get_doctest(text, {"__name__": "__docs__"}, "block", None, 0)
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    runner.run(test, out=sys.stdout.write)
+    sys.exit(1 if runner.failures else 0)
+"""
+
+
+def run_python(block: Block, cwd: Path) -> None:
+    """A python block (run, must not raise) or a pycon block (a doctest), in a process of
+    its own — a block that registers an effect or a solver leaves the tests' process as it
+    was — in the page's workspace."""
+    source = cwd / f".block-{block.line}.txt"
+    source.write_text(block.text, encoding="utf-8")
+    done = subprocess.run(
+        [sys.executable, "-c", _RUNNER, block.language, str(source)],
+        cwd=cwd,
+        env=environment(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        timeout=900,
+    )
+    if done.returncode != 0:
+        raise AssertionError(f"line {block.line} ({block.language}):\n{done.stdout[-4000:]}")
 
 
 def _missing(programs: list[str]) -> bool:
@@ -264,13 +270,12 @@ def check_page(path: Path, tmp: Path) -> int:
     page = parse_page(path)
     cwd = workspace(tmp)
     ran = 0
-    namespace: dict[str, object] = {"__name__": "__docs__"}
     for block in page.blocks:
         if block.skip or _missing(block.needs):
             continue
         if block.language == "console":
             compare(block, run_console(block, cwd))
         else:
-            run_python([block], cwd, namespace)
+            run_python(block, cwd)
         ran += 1
     return ran

@@ -60,3 +60,16 @@ def test_a_changed_output_fails_its_page(tmp_path: Path) -> None:
         check_page(page, tmp_path / "work")
     page.write_text(page.read_text().replace("11.5", "9.958"), encoding="utf-8")
     assert check_page(page, tmp_path / "work2") == 1
+
+
+def test_a_changed_python_result_fails_its_page(tmp_path: Path) -> None:
+    from tests.docs.examples import check_page
+
+    page = tmp_path / "page.md"
+    page.write_text(
+        "```pycon\n>>> import surrogate\n>>> round(surrogate.simulate(1, 0.2, 0.012).f60_n, 2)\n"
+        "9.5\n```\n",
+        encoding="utf-8",
+    )
+    with pytest.raises(AssertionError, match="Expected:"):
+        check_page(page, tmp_path / "work")
