@@ -109,6 +109,13 @@ class CalibrationResult:
     first-order test at the noise level may not hold there whatever the budget. Empty
     where every run was the deck's own (or the solver does not say: results cached
     before the solver reported it, the built-in solver).
+
+    ``noise_n`` is the noise level σ the misfit is judged against (the replicates'
+    pooled scatter, or ``[measurements] noise_n``); ``effects`` the model's effects;
+    ``rmse_per_test_n`` the RMSE of each test [N]; ``iterations`` the global phase's
+    verifications; ``study`` and ``storage`` the Optuna study
+    ``<name>/calibrate/<model>`` and its storage; ``message`` the sentence the command
+    prints.
     """
 
     params: dict[str, float]

@@ -121,6 +121,13 @@ class DiagnosisResult:
     all the same, and only a confirmed effect is named). ``solver_calls`` counts the
     expensive runs.
 
+    ``rmse_n``, ``heldout_rmse_n`` and ``noise_n`` are the current model's RMSE, its
+    leave-one-test-out RMSE and the noise level; ``systematic`` whether the F-test
+    against the noise rejects (``p_value``); ``where`` the tests, angle bands and
+    condition values where it fails; ``unexplained`` the column the residual follows
+    when no effect of the library explains it (else None); ``verdict`` the sentence the
+    command prints; ``effects`` the current model's effects.
+
     ``rebased``: each time the basin check found the current model's calibration not at
     its best — the model refitted from a leader's optimum with the leader switched off
     (its parameters at their off values) fitted better than the calibration — with

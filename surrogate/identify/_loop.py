@@ -64,6 +64,11 @@ class RunResult:
     ``dropped`` (why the correction was not trusted and the single-fidelity loop took
     over, else None) and ``dropped_after`` (expensive runs by then). The identifiability
     exponents then come from the corrected model: no expensive runs after verification.
+
+    ``study`` and ``storage`` name the Optuna study ``<name>/verify`` and its storage
+    URL; ``identifiability`` is what the target determines (``statement``, the exponents
+    of F60 in each parameter and the equally good points); ``iterations`` the search
+    iterations; ``message`` the sentence the command prints.
     """
 
     status: str

@@ -81,6 +81,10 @@ class WorkerResult:
     ``runs`` counts the trials this worker (all its processes) finished,
     ``solved`` the solver runs among them (the rest came from the cache);
     ``interrupted`` names the signal that stopped it, if any.
+
+    ``study`` and ``storage`` name the verify study and its storage; ``jobs`` the
+    worker's processes; ``ok`` and ``failed`` the finished trials with and without a
+    curve.
     """
 
     study: str
