@@ -81,6 +81,25 @@ def _add_model_options(parser: argparse.ArgumentParser) -> None:
     _add_plugin(parser)
 
 
+def _add_launcher(parser: argparse.ArgumentParser, runs: str) -> None:
+    """``--launcher NAME`` (a batch scheduler runs ``runs``, one a job) and ``--heartbeat``."""
+    from .cluster import available_launchers
+
+    parser.add_argument(
+        "--launcher",
+        choices=available_launchers(),
+        help=f"a batch scheduler runs {runs}, one run a job, as [cluster] says "
+        "(docs/guides/clusters.md); the storage must be one its nodes reach",
+    )
+    parser.add_argument(
+        "--heartbeat",
+        type=int,
+        default=10,
+        help="heartbeat interval of the workers in s (default 10); a run silent for three "
+        "is retried",
+    )
+
+
 def _print_json(payload: Any) -> None:
     print(json.dumps(payload, allow_nan=True))
 
@@ -396,6 +415,7 @@ def _add_run(commands: _Subparsers) -> argparse.ArgumentParser:
         "0: queue the runs for `surrogate worker` processes elsewhere (default 1)",
     )
     _add_storage_patience(running, "the planner (--jobs N != 1)")
+    _add_launcher(running, "every verification")
     _add_json(running)
     return running
 
@@ -415,6 +435,8 @@ def _run(args: argparse.Namespace) -> int:
         jobs=args.jobs,
         **_patience(args),
         progress=not args.json,
+        launcher=args.launcher,
+        heartbeat_s=args.heartbeat,
     )
     if args.json:
         _print_json(result.to_json())
@@ -789,10 +811,15 @@ def _add_worker(commands: _Subparsers) -> argparse.ArgumentParser:
     _add_storage(
         worker,
         help="postgresql://user@host/db, journal:///path/study.log (or a .log path), "
-        "or sqlite:///path.db (one worker only)",
-        required=True,
+        "or sqlite:///path.db (one worker only); default: $SURROGATE_STORAGE",
     )
     worker.add_argument("--jobs", type=int, default=1, help="worker processes here (default 1)")
+    worker.add_argument(
+        "--max-runs",
+        type=int,
+        help="leave after this many runs (each process); runs of other workers then do not "
+        "keep it waiting (a scheduler's job: 1)",
+    )
     worker.add_argument(
         "--heartbeat", type=int, default=10, help="heartbeat interval in s (default 10)"
     )
@@ -822,16 +849,25 @@ def _patience(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _worker(args: argparse.Namespace) -> int:
+    import os
+
+    from .identify._jobs import STORAGE_VARIABLE
     from .identify._worker import work
 
+    storage = args.storage or os.environ.get(STORAGE_VARIABLE)
+    if not storage:
+        raise InputDataError(
+            f"surrogate worker needs --storage URL (or ${STORAGE_VARIABLE}): the planner's storage"
+        )
     result = work(
         args.study,
-        storage=args.storage,
+        storage=storage,
         jobs=args.jobs,
         heartbeat_s=args.heartbeat,
         idle_timeout_s=args.idle_timeout,
         **_patience(args),
         progress=not args.json,
+        max_runs=args.max_runs,
     )
     if args.json:
         _print_json(result.to_json())

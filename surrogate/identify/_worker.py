@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import signal
 import threading
 import time
@@ -36,6 +37,8 @@ from optuna.trial import TrialState
 from .._errors import InputDataError, Interrupted, SolverError, SurrogateError
 from .._log import show_progress
 from .._pool import check_jobs, one_blas_thread, one_blas_thread_within, process_context
+from ..cluster import Demand, Fleet
+from ..cluster._launcher import JOB_ID_VARIABLE
 from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..storage._optuna import quiet_optuna, suggest
@@ -72,6 +75,7 @@ logger = logging.getLogger(__name__)
 Solve = Callable[[dict[str, Any]], dict[str, Any]]
 POLL_S = 0.5
 HEARTBEAT_S = 10
+JOB_ATTR = "job"  # a trial's system attribute: the scheduler's job whose worker claimed it
 
 
 @dataclass(frozen=True)
@@ -101,7 +105,9 @@ class WorkerDispatcher:
     """Verify a batch of points through the storage: queue, work or wait, collect.
 
     ``jobs`` local worker processes run the batch (0: only wait for workers
-    started elsewhere with ``surrogate worker``; 1: this process works).
+    started elsewhere with ``surrogate worker``; 1: this process works); a ``fleet``
+    keeps worker jobs on a batch scheduler while the batch's runs are open and cancels
+    them when it is over (:class:`surrogate.cluster.Fleet`).
     """
 
     def __init__(
@@ -114,10 +120,12 @@ class WorkerDispatcher:
         storage_patience_s: float = STORAGE_PATIENCE_S,
         solve: Solve = solve_inputs,
         progress: bool = True,
+        fleet: Fleet | None = None,
     ) -> None:
         self.spec = spec
         self.storage = storage
         self.jobs = jobs
+        self.fleet = fleet
         self.heartbeat_s = heartbeat_s
         self.patience = Patience(storage, storage_patience_s, grace_s=3 * heartbeat_s)
         self.solve = solve
@@ -129,7 +137,7 @@ class WorkerDispatcher:
         keys = self.patience(lambda: enqueue(study, self.spec, points, phase=phase))  # repeatable
         if self.jobs > 0:
             self._work(study, keys, phase)
-        elif self.progress:
+        elif self.progress and self.fleet is None:
             logger.info(
                 "[%s] %s: %d runs queued in %s; waiting for `surrogate worker` processes",
                 self.spec.name,
@@ -198,6 +206,8 @@ class WorkerDispatcher:
             if len(records) == len(wanted):
                 return records
             judge(study)
+            if self.fleet is not None:
+                self.fleet.tend(lambda: self._demand(study))
             if self.progress and time.monotonic() - said >= self.heartbeat_s:
                 said = time.monotonic()
                 open_keys = wanted - records.keys()
@@ -213,6 +223,20 @@ class WorkerDispatcher:
                     states.count(TrialState.RUNNING),
                 )
             time.sleep(POLL_S)
+
+    def _demand(self, study: optuna.Study) -> Demand:
+        """What the queue asks of the fleet: the runs queued (any batch's: a worker takes
+        the oldest), the jobs holding a running run, the runs finished so far."""
+        trials = self.patience(lambda: study.get_trials(deepcopy=False))
+        return Demand(
+            waiting=sum(t.state == TrialState.WAITING for t in trials),
+            holders=frozenset(
+                str(t.system_attrs[JOB_ATTR])
+                for t in trials
+                if t.state == TrialState.RUNNING and JOB_ATTR in t.system_attrs
+            ),
+            finished=sum(t.state == TrialState.COMPLETE for t in trials),
+        )
 
 
 class _StaleJudge:
@@ -252,6 +276,7 @@ def work(
     storage_reached: bool = False,
     solve: Solve = solve_inputs,
     progress: bool = True,
+    max_runs: int | None = None,
 ) -> WorkerResult:
     """Run queued verification trials of ``study`` until none is left.
 
@@ -281,6 +306,9 @@ def work(
         (tests pass a cheap stand-in here; a study file cannot).
     progress : bool
         One line per finished run (logger ``surrogate``, stderr unless configured).
+    max_runs : int, optional
+        Leave after this many runs (each worker process); then runs of other workers do
+        not keep it waiting either (a scheduler's job: one run, ``--max-runs 1``).
     """
     spec = study if isinstance(study, StudySpec) else load_study(study)
     refuse_model_effects(spec, "surrogate worker")
@@ -289,10 +317,18 @@ def work(
     if not isinstance(idle_timeout_s, int | float) or not idle_timeout_s >= 0:
         raise InputDataError(f"--idle-timeout must be ≥ 0 s, got {idle_timeout_s!r}")
     check_storage_patience(storage_patience_s)
+    if max_runs is not None and (
+        isinstance(max_runs, bool) or not isinstance(max_runs, int) or max_runs < 1
+    ):
+        raise InputDataError(f"--max-runs must be a whole number ≥ 1, got {max_runs!r}")
     quiet_optuna()
     if progress:
         show_progress()
-    options: dict[str, Any] = {"heartbeat_s": heartbeat_s, "patience_s": storage_patience_s}
+    options: dict[str, Any] = {
+        "heartbeat_s": heartbeat_s,
+        "patience_s": storage_patience_s,
+        "max_runs": max_runs,
+    }
     worker = _Worker(
         spec, storage, **options, reached=storage_reached, solve=solve, progress=progress
     )
@@ -402,8 +438,11 @@ class _Worker:
         reached: bool = False,
         solve: Solve,
         progress: bool,
+        max_runs: int | None = None,
     ) -> None:
         self.url = storage
+        self.max_runs = max_runs
+        self.job_id = os.environ.get(JOB_ID_VARIABLE) or None
         self._stop: str | None = None
         self.patience = Patience(
             storage, patience_s, grace_s=3 * heartbeat_s, stopping=lambda: self._stop is not None
@@ -449,20 +488,24 @@ class _Worker:
             engine.dispose()
 
     def loop(self, idle_timeout_s: float) -> dict[str, Any]:
-        """Work until nothing has been queued or running for ``idle_timeout_s``."""
+        """Work until nothing has been queued or running for ``idle_timeout_s`` (with
+        ``max_runs``: until that many runs, or nothing queued for ``idle_timeout_s``)."""
         main_thread = threading.current_thread() is threading.main_thread()
         previous = {sig: signal.signal(sig, self._on_signal) for sig in _SIGNALS if main_thread}
         try:
             with storage_errors(self.url):
                 idle_since = time.monotonic()
                 judge = _StaleJudge(self.patience, self.heartbeat_s)
-                while self._stop is None:
+                taken = 0
+                while self._stop is None and taken != self.max_runs:
                     judge(self.study)
                     trial_id = self._claim()
                     if trial_id is not None:
                         self._run(trial_id)
+                        taken += 1
                         idle_since = time.monotonic()
-                    elif self.patience(self._running):  # idle once nothing is queued or running
+                    elif self.max_runs is None and self.patience(self._running):
+                        # idle once nothing is queued or running
                         idle_since = time.monotonic()
                         time.sleep(POLL_S)
                     elif time.monotonic() - idle_since < idle_timeout_s:
@@ -497,6 +540,12 @@ class _Worker:
                 claim = partial(self.storage.set_trial_state_values, trial_id, TrialState.RUNNING)
                 if self.patience(claim):
                     self.patience(partial(self.storage.record_heartbeat, trial_id))
+                    if self.job_id is not None:  # the planner's fleet: this job holds a run
+                        self.patience(
+                            partial(
+                                self.storage.set_trial_system_attr, trial_id, JOB_ATTR, self.job_id
+                            )
+                        )
                     return trial_id
             except optuna.exceptions.UpdateFinishedTrialError:
                 continue
