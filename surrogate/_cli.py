@@ -480,6 +480,7 @@ def _add_calibrate(commands: _Subparsers) -> argparse.ArgumentParser:
         "--budget", type=int, help="override [budget] calibration_solver_calls (full-solver runs)"
     )
     cal.add_argument("--jobs", type=int, default=1, help="solver processes per verification")
+    _add_launcher(cal, "every run of the external full solver")
     _add_json(cal)
     return cal
 
@@ -495,6 +496,8 @@ def _calibrate(args: argparse.Namespace) -> int:
         max_solver_calls=args.budget,
         jobs=args.jobs,
         progress=not args.json,
+        launcher=args.launcher,
+        heartbeat_s=args.heartbeat,
     )
     if args.json:
         _print_json(result.to_json())
@@ -718,6 +721,7 @@ def _add_diagnose(commands: _Subparsers) -> argparse.ArgumentParser:
         help="processes for the candidates' refits and an external solver's runs of one "
         "verification (default: all CPUs)",
     )
+    _add_launcher(diag, "every run of the external full solver (the refits stay here)")
     _add_json(diag)
     return diag
 
@@ -733,6 +737,8 @@ def _diagnose(args: argparse.Namespace) -> int:
         storage=args.storage,
         jobs=args.jobs,
         progress=not args.json,
+        launcher=args.launcher,
+        heartbeat_s=args.heartbeat,
     )
     spec = load_study(args.study)
     plot = write_ladder_plot(result.ladder, spec.directory / f"{spec.name}-compare" / "ladder.png")
@@ -821,6 +827,14 @@ def _add_worker(commands: _Subparsers) -> argparse.ArgumentParser:
         "keep it waiting (a scheduler's job: 1)",
     )
     worker.add_argument(
+        "--queue",
+        choices=("verify", "runs"),
+        default="verify",
+        help="verify: the main job's runs (surrogate run); runs: the expensive runs of "
+        "calibrate/diagnose --launcher (default verify)",
+    )
+    _add_plugin(worker)
+    worker.add_argument(
         "--heartbeat", type=int, default=10, help="heartbeat interval in s (default 10)"
     )
     worker.add_argument(
@@ -851,9 +865,12 @@ def _patience(args: argparse.Namespace) -> dict[str, Any]:
 def _worker(args: argparse.Namespace) -> int:
     import os
 
+    from .effects import load_plugin
     from .identify._jobs import STORAGE_VARIABLE
     from .identify._worker import work
 
+    for module in args.plugin:
+        load_plugin(module)
     storage = args.storage or os.environ.get(STORAGE_VARIABLE)
     if not storage:
         raise InputDataError(
@@ -868,6 +885,7 @@ def _worker(args: argparse.Namespace) -> int:
         **_patience(args),
         progress=not args.json,
         max_runs=args.max_runs,
+        queue=args.queue,
     )
     if args.json:
         _print_json(result.to_json())

@@ -41,7 +41,7 @@ from ..cluster import Demand, Fleet
 from ..cluster._launcher import JOB_ID_VARIABLE
 from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
-from ..storage._optuna import quiet_optuna, suggest
+from ..storage._optuna import quiet_optuna
 from ..storage._storage import (
     MAX_RETRY,
     STORAGE_PATIENCE_S,
@@ -55,18 +55,7 @@ from ..storage._storage import (
     unreachable,
 )
 from ..study._spec import StudySpec, load_study
-from ._objective import refuse_model_effects
-from ._verify import (
-    Verification,
-    as_planned,
-    enqueue,
-    finished_records,
-    queue_lost_copies,
-    record_of,
-    tell_verification,
-    verification_inputs,
-    verify_study_name,
-)
+from ._verify import VERIFY, queue_lost_copies
 
 __all__ = ["HEARTBEAT_S", "WorkerDispatcher", "WorkerResult", "work"]
 
@@ -121,20 +110,24 @@ class WorkerDispatcher:
         solve: Solve = solve_inputs,
         progress: bool = True,
         fleet: Fleet | None = None,
+        queue: Any = VERIFY,
     ) -> None:
         self.spec = spec
         self.storage = storage
         self.jobs = jobs
         self.fleet = fleet
+        self.queue = queue
         self.heartbeat_s = heartbeat_s
         self.patience = Patience(storage, storage_patience_s, grace_s=3 * heartbeat_s)
         self.solve = solve
         self.progress = progress
 
     def __call__(
-        self, study: optuna.Study, points: list[dict[str, float]], phase: str
-    ) -> dict[str, Verification]:
-        keys = self.patience(lambda: enqueue(study, self.spec, points, phase=phase))  # repeatable
+        self, study: optuna.Study, points: list[dict[str, Any]], phase: str
+    ) -> dict[str, Any]:
+        """Queue ``points`` (the queue's items: the verify study's points, the run queue's
+        solver inputs), run or wait for them; their records by input hash."""
+        keys = self.patience(lambda: self.queue.enqueue(study, self.spec, points, phase))
         if self.jobs > 0:
             self._work(study, keys, phase)
         elif self.progress and self.fleet is None:
@@ -158,7 +151,7 @@ class WorkerDispatcher:
         Runs still open after ``MAX_RETRY + 1`` rounds stop the planner with one line."""
 
         def open_runs() -> set[str]:
-            return set(keys) - set(self.patience(lambda: finished_records(study, keys)))
+            return set(keys) - set(self.patience(lambda: self.queue.finished(study, keys)))
 
         died = None
         for _ in range(MAX_RETRY + 1):
@@ -176,6 +169,7 @@ class WorkerDispatcher:
                 storage_reached=True,
                 solve=self.solve,
                 progress=False,
+                queue=self.queue.name,
             )
             if done.interrupted in _SIGNAL_NAMES:
                 raise Interrupted(
@@ -197,12 +191,12 @@ class WorkerDispatcher:
                 "same command again (the runs finished are kept)"
             )
 
-    def _wait(self, study: optuna.Study, keys: list[str], phase: str) -> dict[str, Verification]:
+    def _wait(self, study: optuna.Study, keys: list[str], phase: str) -> dict[str, Any]:
         """Until every run of ``keys`` is over; says what it waits for every heartbeat."""
         wanted, said = set(keys), time.monotonic()
         judge = _StaleJudge(self.patience, self.heartbeat_s)
         while True:
-            records = self.patience(lambda: finished_records(study, wanted))
+            records = self.patience(lambda: self.queue.finished(study, wanted))
             if len(records) == len(wanted):
                 return records
             judge(study)
@@ -277,6 +271,7 @@ def work(
     solve: Solve = solve_inputs,
     progress: bool = True,
     max_runs: int | None = None,
+    queue: str = "verify",
 ) -> WorkerResult:
     """Run queued verification trials of ``study`` until none is left.
 
@@ -309,9 +304,13 @@ def work(
     max_runs : int, optional
         Leave after this many runs (each worker process); then runs of other workers do
         not keep it waiting either (a scheduler's job: one run, ``--max-runs 1``).
+    queue : str
+        ``verify`` (the main job's verify study) or ``runs`` (the run queue of
+        ``calibrate``/``diagnose --launcher``, :mod:`surrogate.identify._runs`).
     """
     spec = study if isinstance(study, StudySpec) else load_study(study)
-    refuse_model_effects(spec, "surrogate worker")
+    rules = queue_named(queue)
+    rules.check(spec)
     check_jobs(jobs)
     check_workers(storage, jobs)
     if not isinstance(idle_timeout_s, int | float) or not idle_timeout_s >= 0:
@@ -328,6 +327,7 @@ def work(
         "heartbeat_s": heartbeat_s,
         "patience_s": storage_patience_s,
         "max_runs": max_runs,
+        "queue": rules,
     }
     worker = _Worker(
         spec, storage, **options, reached=storage_reached, solve=solve, progress=progress
@@ -338,7 +338,17 @@ def work(
         worker.close()
         options["reached"] = True  # by this process, just now
         counts = _work_in_processes(spec, storage, jobs, options, idle_timeout_s, solve, progress)
-    return WorkerResult(verify_study_name(spec), storage, jobs, **counts)
+    return WorkerResult(rules.study_name(spec), storage, jobs, **counts)
+
+
+def queue_named(name: str) -> Any:
+    """The rules of queue ``name`` (``verify``, ``runs``), or a one-line error."""
+    from ._runs import RUNS
+
+    queues = {VERIFY.name: VERIFY, RUNS.name: RUNS}
+    if name not in queues:
+        raise InputDataError(f"--queue must be one of {', '.join(queues)}, got {name!r}")
+    return queues[name]
 
 
 def _work_in_processes(
@@ -439,9 +449,11 @@ class _Worker:
         solve: Solve,
         progress: bool,
         max_runs: int | None = None,
+        queue: Any = VERIFY,
     ) -> None:
         self.url = storage
         self.max_runs = max_runs
+        self.queue = queue
         self.job_id = os.environ.get(JOB_ID_VARIABLE) or None
         self._stop: str | None = None
         self.patience = Patience(
@@ -453,22 +465,18 @@ class _Worker:
             opened: Any = optuna.storages.get_storage(
                 open_storage(storage, heartbeat_s=heartbeat_s, must_exist=True)
             )
+            name = queue.study_name(spec)
             try:
                 study = optuna.load_study(
-                    study_name=verify_study_name(spec),
-                    storage=opened,
-                    sampler=optuna.samplers.RandomSampler(),
+                    study_name=name, storage=opened, sampler=optuna.samplers.RandomSampler()
                 )
             except KeyError:
-                raise InputDataError(
-                    f"no study {verify_study_name(spec)!r} in {storage}; plan it first: "
-                    f"surrogate run {spec.path} --storage {storage} --jobs 0"
-                ) from None
-            return opened, study, opened.get_study_id_from_name(verify_study_name(spec))
+                raise InputDataError(queue.missing(spec, storage)) from None
+            return opened, study, opened.get_study_id_from_name(name)
 
         with storage_errors(storage):  # a database never reached is not waited for
             self.storage, self.study, self.study_id = self.patience(start) if reached else start()
-        self.spec = as_planned(spec, self.study.user_attrs)
+        self.spec = queue.planned(spec, self.study.user_attrs)
         self.heartbeat_s = heartbeat_s
         self.solve = solve
         self.progress = progress
@@ -561,8 +569,7 @@ class _Worker:
         beat = _HeartbeatThread(self.storage, trial_id, self.heartbeat_s, self.patience)
         beat.start()
         try:
-            params = self.patience(lambda: suggest(trial, self.spec.space))
-            inputs = verification_inputs(self.spec, params)
+            params, inputs = self.patience(lambda: self.queue.inputs(self.spec, trial))
             key = input_hash(inputs)
             queued = trial.user_attrs.get("input_hash", key)
             # another solver version or settings than the planner's: refuse rather than
@@ -581,9 +588,9 @@ class _Worker:
             raise
         beat.stop()
 
-        def tell() -> Verification:
+        def tell() -> Any:
             trial.set_user_attr("input_hash", queued)
-            return tell_verification(self.study, trial, self.spec, params, result)
+            return self.queue.tell(self.study, trial, self.spec, params, result)
 
         try:
             record = self.patience(tell)
@@ -593,7 +600,7 @@ class _Worker:
             if frozen.state == TrialState.RUNNING:
                 raise
             if frozen.state == TrialState.COMPLETE or "reason" in frozen.user_attrs:
-                self._count(trial.number, record_of(frozen))
+                self._count(trial.number, self.queue.record_of(frozen))
             else:
                 self._judged_stale(trial)
             return
@@ -647,16 +654,11 @@ class _Worker:
                 self._stop,
             )
 
-    def _count(self, number: int, record: Verification) -> None:
+    def _count(self, number: int, record: Any) -> None:
         self.counts["runs"] += 1
         self.counts["ok" if record.ok else "failed"] += 1
         if self.progress:
-            text = (
-                f"F60 {record.f60_n:.4g} N, misfit {100 * record.misfit:.2f} %"
-                if record.ok
-                else f"failed: {record.reason}"
-            )
-            logger.info("[%s] trial %d: %s", self.spec.name, number, text)
+            logger.info("[%s] trial %d: %s", self.spec.name, number, self.queue.describe(record))
 
 
 _SIGNALS = (signal.SIGTERM, signal.SIGINT)
