@@ -45,6 +45,8 @@ _LAZY = {
     "compare": ".calibration",
     "ExportResult": ".identify",
     "export": ".identify",
+    "StatusResult": ".identify",
+    "status": ".identify",
     "ReportResult": ".reporting",
     "report": ".reporting",
     "Effect": ".effects",
@@ -79,6 +81,7 @@ __all__ = [
     "RunResult",
     "SampleSet",
     "SolverError",
+    "StatusResult",
     "StudySpec",
     "SurrogateError",
     "available_effects",
@@ -98,6 +101,7 @@ __all__ = [
     "report",
     "run",
     "simulate",
+    "status",
 ]
 
 __version__ = "0.1.0"

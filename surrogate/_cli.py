@@ -899,6 +899,42 @@ def _worker(args: argparse.Namespace) -> int:
     return 0
 
 
+# surrogate status ----------------------------------------------------------------------
+
+
+def _add_status(commands: _Subparsers) -> argparse.ArgumentParser:
+    state = commands.add_parser(
+        "status", help="a study's queued and running runs and their scheduler jobs"
+    )
+    state.add_argument("study", type=Path, help="study file")
+    _add_storage(state, help="Optuna storage URL (default: the study's)")
+    _add_json(state)
+    return state
+
+
+def _status(args: argparse.Namespace) -> int:
+    from .identify._status import status
+
+    result = status(args.study, storage=args.storage)
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(f"study {result.study!r} in {result.storage}")
+    for name, n in result.queues.items():
+        print(
+            f"{name}: {n['queued']} queued, {n['running']} running, {n['finished']} finished "
+            f"({n['ok']} ok, {n['failed']} failed), {n['given_back']} given back and queued again"
+        )
+    if result.jobs:
+        print("jobs" + ("" if result.live else " (as last recorded; the scheduler is not here)"))
+    for job in result.jobs:
+        why = f" ({job['reason']})" if job["reason"] else ""
+        code = "" if job["exit_code"] is None else f", exit code {job['exit_code']}"
+        run = "" if job["run"] is None else f", runs trial {job['run']}"
+        print(f"  {job['job_id']:>8} {job['state']}{why}{code}{run}  [{job['queue']}]")
+    return 0
+
+
 # The command line ----------------------------------------------------------------------
 
 _COMMANDS: tuple[tuple[Callable[[_Subparsers], argparse.ArgumentParser], _Handler], ...] = (
@@ -914,6 +950,7 @@ _COMMANDS: tuple[tuple[Callable[[_Subparsers], argparse.ArgumentParser], _Handle
     (_add_diagnose, _diagnose),
     (_add_dashboard, _dashboard),
     (_add_worker, _worker),
+    (_add_status, _status),
 )
 """(declare the arguments, handle the command) per command, in the order of ``--help``."""
 

@@ -43,6 +43,7 @@ __all__ = ["FAILURES_IN_A_ROW", "Demand", "Fleet", "jobs_to_submit"]
 
 logger = logging.getLogger(__name__)
 
+GONE = "GONE"  # a job the scheduler no longer knows, its end unknown
 FAILURES_IN_A_ROW = 4  # as a run's worker may die MAX_RETRY + 1 times before it is over
 _HISTORY = 200  # jobs kept in the record a study's status shows
 
@@ -89,6 +90,9 @@ class Fleet:
     progress : bool
         Log submissions and cancellations (logger ``surrogate``); ends that were not
         clean are warnings either way.
+    history : sequence of JobState
+        The jobs an earlier planner of the same queue recorded: taken over (those
+        still alive are watched, and cancelled at the end, as this one's).
     """
 
     def __init__(
@@ -102,12 +106,13 @@ class Fleet:
         linger_s: float = 0.0,
         record: Callable[[list[dict[str, Any]]], None] | None = None,
         progress: bool = True,
+        history: Sequence[JobState] = (),
     ) -> None:
         self.launcher, self.request = launcher, request
         self.poll_s, self.label, self.stopped = poll_s, label, stopped
         self.linger_s = linger_s
         self.record, self.progress = record, progress
-        self.history: dict[str, JobState] = {}
+        self.history: dict[str, JobState] = {job.job_id: job for job in history}
         self.held: set[str] = set()
         self._cancelled: set[str] = set()
         self._failures = 0
@@ -190,7 +195,7 @@ class Fleet:
                 continue
             now = listed.get(job_id)
             if now is None or not now.alive:
-                final = self.launcher.final(job_id) or now or JobState(job_id, ENDED, "GONE")
+                final = self.launcher.final(job_id) or now or JobState(job_id, ENDED, GONE)
                 now = final if not final.alive else (now or final)
             changed |= now != last
             self.history[job_id] = now
@@ -204,8 +209,9 @@ class Fleet:
         return [job for job in self.history.values() if job.alive]
 
     def _ended(self, job: JobState) -> None:
-        """A job that ended: nothing to do if cleanly or cancelled by us (module docstring)."""
-        if job.succeeded or job.job_id in self._cancelled:
+        """A job that ended: nothing to do if cleanly, cancelled by us, or forgotten by the
+        scheduler before we saw how it ended (module docstring)."""
+        if job.succeeded or job.job_id in self._cancelled or job.state == GONE:
             return
         code = "" if job.exit_code is None else f", exit code {job.exit_code}"
         logger.warning(

@@ -42,7 +42,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 from .._errors import InputDataError
 from ..study._cluster import ClusterSettings
@@ -99,7 +99,19 @@ class JobState:
     def alive(self) -> bool:
         return self.phase != ENDED
 
-    def to_json(self) -> dict[str, object]:
+    @classmethod
+    def from_json(cls, record: dict[str, Any]) -> JobState:
+        """A job as :meth:`to_json` wrote it (a planner's record in the storage)."""
+        return cls(
+            str(record["job_id"]),
+            str(record.get("phase", ENDED)),
+            str(record.get("state", "")),
+            str(record.get("reason", "")),
+            record.get("exit_code"),
+            succeeded=record.get("state") == "COMPLETED" and record.get("exit_code") in (0, None),
+        )
+
+    def to_json(self) -> dict[str, Any]:
         return {
             "job_id": self.job_id,
             "phase": self.phase,

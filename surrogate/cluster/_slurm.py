@@ -14,6 +14,7 @@ node, a busy partition or the account's running-job limit are waited for.
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import shlex
@@ -27,6 +28,8 @@ from .._errors import InputDataError
 from ._launcher import ENDED, JOB_ID_VARIABLE, PENDING, RUNNING, JobRequest, JobState
 
 __all__ = ["SlurmLauncher", "batch_script", "never_starts", "parse_squeue", "sbatch_directives"]
+
+logger = logging.getLogger(__name__)
 
 SIGNAL_BEFORE_LIMIT_S = 60
 _TOOLS = ("sbatch", "squeue", "scontrol", "scancel", "sinfo")
@@ -57,6 +60,8 @@ _NEVER = {
     "DependencyNeverSatisfied": "it depends on a job that cannot succeed; fix [cluster] "
     "submit_options",
 }
+_NO_NODES = "Requested node configuration is not available"
+_UP = {"idle", "alloc", "mix", "comp", "resv", "plnd", "npc"}  # sinfo's %t of a node at work
 _PER_JOB = re.compile(r"Max\w*PerJob|MaxWallDuration")  # a per-job limit of the account or QOS
 _BUDGET = re.compile(r"Grp\w*?(?<!Run)Minutes")  # CPU-minutes spent, not running jobs' minutes
 
@@ -173,11 +178,24 @@ class SlurmLauncher:
             script=batch_script(request),
             check=False,
         )
-        if done.returncode != 0:
+        if done.returncode != 0 and _NO_NODES in done.stderr and not self._nodes_up(request):
+            # every node of the partition drained or down: a maintenance the jobs wait for
+            # (Slurm answers for those as for a request no node could ever meet)
+            logger.warning(
+                "every node of the jobs' partition is drained or down now; they wait for them"
+            )
+        elif done.returncode != 0:
             raise InputDataError(
                 f"sbatch refuses the jobs of [cluster] ({_first_line(done.stderr)}); fix "
                 "partition, account, cores, memory_mb, time_limit_min or submit_options"
             )
+
+    def _nodes_up(self, request: JobRequest) -> bool:
+        """Whether a node of the jobs' partition is up (idle, busy, completing, reserved)."""
+        partition = request.cluster.partition
+        where = ["-p", partition] if partition else []
+        states = self._run(["sinfo", "-h", "-o", "%t", *where], check=False).stdout.split()
+        return any(state.rstrip("*~#!%$@^-") in _UP for state in states)
 
     def runs_here(self, request: JobRequest) -> bool:
         partition = request.cluster.partition

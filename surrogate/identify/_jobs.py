@@ -18,7 +18,7 @@ from typing import Any
 
 import optuna
 
-from ..cluster import Fleet, JobRequest, Launcher, check_reachable, get_launcher
+from ..cluster import Fleet, JobRequest, JobState, Launcher, check_reachable, get_launcher
 from ..storage._storage import Patience, redacted_url
 from ..study._spec import StudySpec
 
@@ -101,6 +101,9 @@ class Launch:
             patience(lambda: study.set_user_attr(JOBS_ATTR, value))
 
         label = study.study_name.split("/")[0]
+        earlier = study.user_attrs.get(JOBS_ATTR)
+        if not isinstance(earlier, dict) or earlier.get("job_name") != self.request.name:
+            earlier = {}
         return Fleet(
             self.launcher,
             self.request,
@@ -112,6 +115,7 @@ class Launch:
             linger_s=JOB_IDLE_S + heartbeat_s,
             record=record,
             progress=progress,
+            history=[JobState.from_json(job) for job in earlier.get("jobs", [])],
         )
 
 
@@ -139,6 +143,8 @@ def prepare_launch(
         storage_patience_s=storage_patience_s,
         plugins=plugins,
     )
+    folder = request.log_dir.parent
+    check_reachable(storage, folder, runs_here=True)  # SQLite, in-memory: before Slurm is asked
     scheduler.check(request)
-    check_reachable(storage, request.log_dir.parent, runs_here=scheduler.runs_here(request))
+    check_reachable(storage, folder, runs_here=scheduler.runs_here(request))
     return Launch(scheduler, request, storage)
