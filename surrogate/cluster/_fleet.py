@@ -256,12 +256,12 @@ class Fleet:
             return []
 
     def cancel_all(self, phases: Sequence[str] = (PENDING, RUNNING)) -> None:
-        """Cancel every job of the name that is pending or running (or in ``phases``)."""
+        """Cancel every job of the name that is pending or running (or in ``phases``), as
+        the scheduler lists them (as last seen where it cannot be asked)."""
         try:
-            listed = self.launcher.jobs(self.request.name)
+            states = {job.job_id: job for job in self.launcher.jobs(self.request.name)}
         except InputDataError:  # the scheduler cannot be asked: cancel what we know of
-            listed = []
-        states = {**self.history, **{job.job_id: job for job in listed}}
+            states = dict(self.history)
         todo = sorted(
             (job_id for job_id, job in states.items() if job.phase in phases),
             key=lambda job_id: (len(job_id), job_id),
