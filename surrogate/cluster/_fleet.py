@@ -3,8 +3,8 @@
 One job runs one queued run (:mod:`surrogate.cluster._launcher`), so the rules are few:
 
 - **demand** (:func:`jobs_to_submit`): a job for each queued run, less the jobs that will
-  claim one (pending, or running without a run), with at most ``[cluster] max_jobs``
-  queued or running at once;
+  claim one (pending, or running and never seen holding a run: one that held one is
+  leaving), with at most ``[cluster] max_jobs`` queued or running at once;
 - **a job that ended otherwise than cleanly** (failed, timed out, preempted, its node
   lost, cancelled by someone else): a run it held comes back to the queue through the
   heartbeat rules (a worker given SIGTERM gives it back at once; a killed one's run goes
@@ -46,6 +46,7 @@ logger = logging.getLogger(__name__)
 GONE = "GONE"  # a job the scheduler no longer knows, its end unknown
 FAILURES_IN_A_ROW = 4  # as a run's worker may die MAX_RETRY + 1 times before it is over
 _HISTORY = 200  # jobs kept in the record a study's status shows
+SOON_S = 1.0  # after a run finished, the scheduler is asked again this soon [s]
 
 
 @dataclass(frozen=True)
@@ -117,7 +118,8 @@ class Fleet:
         self._cancelled: set[str] = set()
         self._failures = 0
         self._finished = -1
-        self._next = 0.0
+        self._next = self._last = 0.0
+        self._done: int | None = None
         self._previous: Any = None
 
     # -- the context: SIGTERM, and cancel on the way out ------------------------------------
@@ -141,12 +143,17 @@ class Fleet:
         raise Interrupted("SIGTERM", self.stopped)
 
     # -- watching ---------------------------------------------------------------------------
-    def tend(self, demand: Callable[[], Demand]) -> None:
+    def tend(self, demand: Callable[[], Demand], *, done: int | None = None) -> None:
         """Once every ``poll_s``: read the jobs, act on those that ended or can never
-        start, and submit what ``demand()`` asks for."""
-        if time.monotonic() < self._next:
+        start, and submit what ``demand()`` asks for. ``done`` (the runs the caller saw
+        finished) brings the next look forward to :data:`SOON_S` after it changes: a
+        job that finished its run leaves, and the next run need not wait for the poll."""
+        now = time.monotonic()
+        if done is not None and done != self._done:
+            self._done, self._next = done, min(self._next, self._last + SOON_S)
+        if now < self._next:
             return
-        self._next = time.monotonic() + self.poll_s
+        self._last, self._next = now, now + self.poll_s
         wanted = demand()
         self.held |= wanted.holders
         if wanted.finished > self._finished:
@@ -160,8 +167,12 @@ class Fleet:
                     f"{job.never_starts}; its jobs are cancelled, the runs finished are kept "
                     "(the same command resumes)"
                 )
+        # a job that held a run is leaving (one run a job), not about to claim one
         count = jobs_to_submit(
-            wanted.waiting, [j.job_id for j in alive], wanted.holders, self.request.cluster.max_jobs
+            wanted.waiting,
+            [j.job_id for j in alive],
+            frozenset(self.held),
+            self.request.cluster.max_jobs,
         )
         self._submit(count, wanted.waiting)
 
@@ -174,11 +185,12 @@ class Fleet:
             self.history[job_id] = JobState(job_id, PENDING, "SUBMITTED")
         if self.progress:
             logger.info(
-                "[%s] %s: submitted job %s for %d queued runs (%d alive, at most %d)",
+                "[%s] %s: submitted job %s for %d queued run%s (%d alive, at most %d)",
                 self.label,
                 self.launcher.name,
                 ", ".join(submitted),
                 waiting,
+                "" if waiting == 1 else "s",
                 sum(j.alive for j in self.history.values()),
                 self.request.cluster.max_jobs,
             )

@@ -201,7 +201,7 @@ class WorkerDispatcher:
                 return records
             judge(study)
             if self.fleet is not None:
-                self.fleet.tend(lambda: self._demand(study))
+                self.fleet.tend(lambda: self._demand(study), done=len(records))
             if self.progress and time.monotonic() - said >= self.heartbeat_s:
                 said = time.monotonic()
                 open_keys = wanted - records.keys()
