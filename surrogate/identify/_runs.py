@@ -35,7 +35,7 @@ from ..storage._optuna import quiet_optuna, suggest
 from ..storage._storage import STORAGE_PATIENCE_S, open_storage, storage_errors
 from ..study._spec import StudySpec
 from ._jobs import Launch, prepare_launch
-from ._verify import finished_records, retry_pending
+from ._verify import finished_records, known_keys
 
 __all__ = ["RUNS", "QueuedRuns", "RunRecord", "runs_study_name"]
 
@@ -102,14 +102,10 @@ class RunQueue:
         return params, inputs
 
     def enqueue(
-        self, study: optuna.Study, spec: StudySpec, items: Iterable[Mapping[str, Any]], phase: str
+        self, study: optuna.Study, spec: StudySpec, items: Iterable[dict[str, Any]], phase: str
     ) -> list[str]:
         """Queue each solver input as a WAITING trial unless queued, running or done."""
-        known = {
-            t.user_attrs.get("input_hash")
-            for t in study.get_trials(deepcopy=False)
-            if t.state != TrialState.FAIL or "reason" in t.user_attrs or retry_pending(t)
-        }
+        known = known_keys(study)
         keys = []
         for inputs in items:
             key = input_hash(inputs)

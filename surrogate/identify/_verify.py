@@ -240,11 +240,7 @@ def enqueue(
 
     Returns the input hashes of ``points`` in order (one per point).
     """
-    known = {
-        t.user_attrs.get("input_hash")
-        for t in study.get_trials(deepcopy=False)
-        if t.state != TrialState.FAIL or "reason" in t.user_attrs or retry_pending(t)
-    }
+    known = known_keys(study)
     keys = []
     for point in points:
         params = {name: float(point[name]) for name in spec.space.names}
@@ -254,6 +250,16 @@ def enqueue(
             known.add(key)
         keys.append(key)
     return keys
+
+
+def known_keys(study: optuna.Study) -> set[str | None]:
+    """The input hashes of the study's runs that are queued, running or done — every run
+    but one abandoned (failed with no copy to come): what a queue does not queue again."""
+    return {
+        t.user_attrs.get("input_hash")
+        for t in study.get_trials(deepcopy=False)
+        if t.state != TrialState.FAIL or "reason" in t.user_attrs or retry_pending(t)
+    }
 
 
 def _trial_attrs(spec: StudySpec, key: str, phase: str) -> dict[str, str]:

@@ -346,3 +346,40 @@ def test_a_planner_started_again_takes_over_the_jobs_recorded(tmp_path):
     fleet.tend(_demand(0))
     fleet.cancel_all()
     assert fleet.history[job].state == "COMPLETED" and launcher.cancelled == []
+
+
+# -- surrogate status -------------------------------------------------------------------------
+def test_status_counts_a_queue_and_lists_its_jobs_as_recorded(tmp_path, capsys, monkeypatch):
+    """Where Slurm's commands do not answer (not on PATH here), the jobs as the planner
+    last recorded them, with the trial each running one holds."""
+    import json
+
+    import optuna
+
+    from surrogate.identify._doe import make_design
+    from surrogate.identify._jobs import JOBS_ATTR
+    from surrogate.identify._verify import enqueue, open_verify_study
+    from surrogate.identify._worker import JOB_ATTR
+
+    study_file, storage = _study(tmp_path), f"journal://{tmp_path / 'study.log'}"
+    spec = load_study(study_file)
+    study = open_verify_study(spec, storage, heartbeat_s=None)
+    enqueue(study, spec, make_design("lhs", spec.space, n=2, seed=0).to_dict("records"), phase="p")
+    claimed = study.get_trials(deepcopy=False)[0]._trial_id
+    study._storage.set_trial_state_values(claimed, optuna.trial.TrialState.RUNNING)
+    study._storage.set_trial_system_attr(claimed, JOB_ATTR, "7")
+    jobs = [JobState("7", RUNNING, "RUNNING").to_json(), JobState("6", ENDED, "TIMEOUT").to_json()]
+    study.set_user_attr(JOBS_ATTR, {"launcher": "slurm", "job_name": "surrogate-x", "jobs": jobs})
+    monkeypatch.setenv("PATH", str(tmp_path / "no-slurm-here"))
+    main(["status", str(study_file), "--storage", storage, "--json"])
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["queues"]["paper-coating/verify"] == {
+        "queued": 1, "running": 1, "finished": 0, "ok": 0, "failed": 0, "given_back": 0
+    }  # fmt: skip
+    assert [(j["job_id"], j["state"], j["run"]) for j in shown["jobs"]] == [
+        ("7", "RUNNING", 0),
+        ("6", "TIMEOUT", None),
+    ]
+    assert shown["live"] is False
+    main(["status", str(study_file), "--storage", storage])
+    assert "jobs (as last recorded; the scheduler is not here)" in capsys.readouterr().out

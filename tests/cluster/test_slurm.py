@@ -28,6 +28,7 @@ import pytest
 
 from surrogate.storage._storage import open_storage
 from tests.cluster.conftest import lsdyna_study
+from tests.workers.test_workers import _wait_for
 
 pytestmark = [pytest.mark.slurm, pytest.mark.slow]
 REPO = Path(__file__).resolve().parents[2]
@@ -53,16 +54,6 @@ def _events(log):
     return [
         (e, k, j) for e, k, _, j in (line.split() for line in Path(log).read_text().splitlines())
     ]
-
-
-def _wait_for(condition, timeout=120.0, every=0.2):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        found = condition()
-        if found:
-            return found
-        time.sleep(every)
-    raise AssertionError(f"timed out after {timeout:g} s")
 
 
 def _first_solve(log):
@@ -124,7 +115,7 @@ def _assert_each_run_once(study_file, storage, log, *, struck, queue="verify"):
     assert max(done.values()) == 1, f"a run solved twice: {done}"
     starts = sum(event == "start" for event, _, _ in events)
     assert len(done) == len(keys) and starts == len(keys) + struck, events
-    _wait_for(lambda: not _alive_jobs(), timeout=30)  # no job left in the queue
+    _wait_for(lambda: not _alive_jobs(), 30, 0.5)  # no job left in the queue
     return trials
 
 
@@ -140,8 +131,8 @@ def test_a_worker_killed_mid_solve_costs_its_run_once(tmp_path, postgres_url, cl
     heartbeats), its copy is queued and a new job solves it."""
     study, log = lsdyna_study(tmp_path), tmp_path / "solves.log"
     planner = _planner("run", study, postgres_url, log)
-    job = _wait_for(lambda: _first_solve(log))
-    os.kill(_wait_for(lambda: _worker_pid(job)), signal.SIGKILL)
+    job = _wait_for(lambda: _first_solve(log), 120, 0.2)
+    os.kill(_wait_for(lambda: _worker_pid(job), 30, 0.1), signal.SIGKILL)
     code, stdout, stderr = _finish(planner)
     assert code == 0, stderr
     _verified(stdout)
@@ -158,9 +149,11 @@ def test_a_job_signalled_before_its_limit_and_a_job_cancelled_give_their_runs_ba
     process of the job): each worker gives its run back at once, a new job redoes it."""
     study, log = lsdyna_study(tmp_path), tmp_path / "solves.log"
     planner = _planner("run", study, postgres_url, log)
-    first = _wait_for(lambda: _first_solve(log))
+    first = _wait_for(lambda: _first_solve(log), 120, 0.2)
     subprocess.run(["scancel", "--batch", "--signal=TERM", first], check=True)
-    second = _wait_for(lambda: [j for e, _, j in _events(log) if e == "start" and j != first])[0]
+    second = _wait_for(
+        lambda: [j for e, _, j in _events(log) if e == "start" and j != first], 120, 0.2
+    )[0]
     subprocess.run(["scancel", second], check=True)
     code, stdout, stderr = _finish(planner)
     assert code == 0, stderr
@@ -180,7 +173,7 @@ def test_a_drained_node_holds_the_job_until_it_is_resumed(tmp_path, postgres_url
     drain = ["scontrol", "update", f"nodename={node}", "state=drain", "reason=maintenance"]
     subprocess.run(drain, check=True)
     planner = _planner("run", study, postgres_url, log)
-    held = _wait_for(lambda: [j for j in _queue("--states=PENDING") if "DRAINED" in j[2]])
+    held = _wait_for(lambda: [j for j in _queue("--states=PENDING") if "DRAINED" in j[2]], 120, 0.5)
     time.sleep(3.0)  # three polls of the planner: it waits, it does not stop
     assert planner.poll() is None and not _events(log), held
     subprocess.run(["scontrol", "update", f"nodename={node}", "state=resume"], check=True)
@@ -197,7 +190,7 @@ def test_a_killed_planner_started_again_takes_over_its_jobs(tmp_path, postgres_u
     and cancels nothing it should not; then ``surrogate status`` lists the jobs."""
     study, log = lsdyna_study(tmp_path), tmp_path / "solves.log"
     planner = _planner("run", study, postgres_url, log)
-    job = _wait_for(lambda: _first_solve(log))
+    job = _wait_for(lambda: _first_solve(log), 120, 0.2)
     planner.kill()
     planner.wait(timeout=30)
     again = _planner("run", study, postgres_url, log)
@@ -228,7 +221,7 @@ def test_a_job_that_can_never_start_stops_the_study_in_one_line(tmp_path, postgr
     lines = stderr.strip().splitlines()
     assert "can never start: PartitionTimeLimit" in lines[-1], stderr
     assert "time_limit_min" in lines[-1]
-    _wait_for(lambda: not _alive_jobs(), timeout=30)
+    _wait_for(lambda: not _alive_jobs(), 30, 0.5)
 
 
 def test_a_partition_slurm_does_not_know_is_refused_before_anything_is_written(tmp_path):
