@@ -63,7 +63,8 @@ def jobs_to_submit(
     waiting: int, alive: Sequence[str], holders: frozenset[str], max_jobs: int
 ) -> int:
     """New jobs for ``waiting`` queued runs, given the ``alive`` jobs (pending or running)
-    of which ``holders`` hold a run already; never more than ``max_jobs`` alive."""
+    of which ``holders`` hold or held a run (one run a job: those claim none); never more
+    than ``max_jobs`` alive."""
     free = sum(1 for job_id in alive if job_id not in holders)
     return max(0, min(waiting - free, max_jobs - len(alive)))
 
@@ -121,6 +122,7 @@ class Fleet:
         self._next = self._last = 0.0
         self._done: int | None = None
         self._previous: Any = None
+        self._stopping = False
 
     # -- the context: SIGTERM, and cancel on the way out ------------------------------------
     def __enter__(self) -> Fleet:
@@ -131,8 +133,14 @@ class Fleet:
     def __exit__(self, kind: type[BaseException] | None, *exc: object) -> None:
         try:
             if kind is None:
-                self.finish()
+                try:
+                    self.finish()
+                except BaseException:  # SIGTERM, Ctrl-C or an error while the jobs leave
+                    self._stopping = True
+                    self.cancel_all()
+                    raise
             else:
+                self._stopping = True
                 self.cancel_all()
         finally:
             if self._previous is not None:
@@ -140,6 +148,9 @@ class Fleet:
                 self._previous = None
 
     def _on_sigterm(self, signum: int, frame: Any) -> None:
+        if self._stopping:  # cancelling already: a second SIGTERM does not cut that short
+            return
+        self._stopping = True
         raise Interrupted("SIGTERM", self.stopped)
 
     # -- watching ---------------------------------------------------------------------------

@@ -55,6 +55,7 @@ if TYPE_CHECKING:  # pandas loads with the surrogate's training set, not in a wo
 __all__ = [
     "METRIC",
     "VERIFY",
+    "Queue",
     "Verification",
     "Verifier",
     "as_planned",
@@ -113,6 +114,45 @@ class Dispatch(Protocol):
     def __call__(
         self, study: optuna.Study, points: list[dict[str, float]], phase: str
     ) -> dict[str, Verification]: ...
+
+
+class Queue(Protocol):
+    """The rules of one queue study that the worker loop and the dispatcher follow
+    (:mod:`surrogate.identify._worker`): the verify study's (:data:`VERIFY`) and the run
+    queue's (:data:`surrogate.identify._runs.RUNS`). A record has ``ok`` and ``reason``."""
+
+    name: str
+
+    def study_name(self, spec: StudySpec) -> str: ...
+
+    def check(self, spec: StudySpec) -> None: ...
+
+    def planned(self, spec: StudySpec, attrs: Mapping[str, Any]) -> StudySpec: ...
+
+    def missing(self, spec: StudySpec, storage: str) -> str: ...
+
+    def inputs(
+        self, spec: StudySpec, trial: optuna.Trial
+    ) -> tuple[dict[str, float], dict[str, Any]]: ...
+
+    def enqueue(
+        self, study: optuna.Study, spec: StudySpec, items: Any, phase: str
+    ) -> list[str]: ...
+
+    def tell(
+        self,
+        study: optuna.Study,
+        trial: optuna.Trial,
+        spec: StudySpec,
+        params: dict[str, float],
+        result: dict[str, Any],
+    ) -> Any: ...
+
+    def record_of(self, trial: FrozenTrial) -> Any: ...
+
+    def finished(self, study: optuna.Study, keys: Iterable[str]) -> dict[str, Any]: ...
+
+    def describe(self, record: Any) -> str: ...
 
 
 def verify_study_name(spec: StudySpec) -> str:

@@ -1,5 +1,9 @@
 """``worker``: full-solver verification shared by many processes through a storage.
 
+(The same loop serves the run queue of ``calibrate``/``diagnose --launcher``,
+``--queue runs``, :mod:`._runs`; its rules differ only in :class:`._verify.Queue`.
+A scheduler's job runs a worker with ``--max-runs 1``, :mod:`._jobs`.)
+
 The planner (``surrogate run``) queues each candidate point as a ``WAITING``
 trial of the study ``<name>/verify`` (``study.enqueue_trial`` with the hash of
 its solver inputs); workers on any machine claim a waiting trial (the storage
@@ -55,7 +59,7 @@ from ..storage._storage import (
     unreachable,
 )
 from ..study._spec import StudySpec, load_study
-from ._verify import VERIFY, queue_lost_copies
+from ._verify import VERIFY, Queue, queue_lost_copies
 
 __all__ = ["HEARTBEAT_S", "WorkerDispatcher", "WorkerResult", "work"]
 
@@ -95,8 +99,10 @@ class WorkerDispatcher:
 
     ``jobs`` local worker processes run the batch (0: only wait for workers
     started elsewhere with ``surrogate worker``; 1: this process works); a ``fleet``
-    keeps worker jobs on a batch scheduler while the batch's runs are open and cancels
-    them when it is over (:class:`surrogate.cluster.Fleet`).
+    keeps worker jobs on a batch scheduler while the batch's runs are open
+    (:class:`surrogate.cluster.Fleet`: the command that made it cancels them when it
+    ends). ``queue`` names the rules of the queue study (:class:`._verify.Queue`: the
+    verify study's, or the run queue's of ``calibrate``/``diagnose --launcher``).
     """
 
     def __init__(
@@ -110,7 +116,7 @@ class WorkerDispatcher:
         solve: Solve = solve_inputs,
         progress: bool = True,
         fleet: Fleet | None = None,
-        queue: Any = VERIFY,
+        queue: Queue = VERIFY,
     ) -> None:
         self.spec = spec
         self.storage = storage
@@ -341,11 +347,11 @@ def work(
     return WorkerResult(rules.study_name(spec), storage, jobs, **counts)
 
 
-def queue_named(name: str) -> Any:
+def queue_named(name: str) -> Queue:
     """The rules of queue ``name`` (``verify``, ``runs``), or a one-line error."""
     from ._runs import RUNS
 
-    queues = {VERIFY.name: VERIFY, RUNS.name: RUNS}
+    queues: dict[str, Queue] = {VERIFY.name: VERIFY, RUNS.name: RUNS}
     if name not in queues:
         raise InputDataError(f"--queue must be one of {', '.join(queues)}, got {name!r}")
     return queues[name]
@@ -449,7 +455,7 @@ class _Worker:
         solve: Solve,
         progress: bool,
         max_runs: int | None = None,
-        queue: Any = VERIFY,
+        queue: Queue = VERIFY,
     ) -> None:
         self.url = storage
         self.max_runs = max_runs
