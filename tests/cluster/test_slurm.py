@@ -184,30 +184,39 @@ def test_a_drained_node_holds_the_job_until_it_is_resumed(tmp_path, postgres_url
     assert held[0][0] == _first_solve(log)
 
 
-def test_a_killed_planner_started_again_takes_over_its_jobs(tmp_path, postgres_url, clean_queue):
-    """The planner SIGKILLed while its job solves, started again with the same command:
-    it finds that job by its name and waits for it (no second job for the run), goes on,
-    and cancels nothing it should not; then ``surrogate status`` lists the jobs."""
+def test_a_planner_stopped_or_killed_and_started_again(tmp_path, postgres_url, clean_queue):
+    """SIGTERM to the planner while its job solves: it cancels its job (whose worker gives
+    the run back) and stops with one line, exit code 143. Started again, it submits a job
+    for the run; SIGKILLed while that one solves and started again with the same command,
+    it finds the job by its name and waits for it (no second job for the run). Then
+    ``surrogate status`` lists the jobs."""
     study, log = lsdyna_study(tmp_path), tmp_path / "solves.log"
     planner = _planner("run", study, postgres_url, log)
-    job = _wait_for(lambda: _first_solve(log), 120, 0.2)
+    first = _wait_for(lambda: _first_solve(log), 120, 0.2)
+    planner.send_signal(signal.SIGTERM)
+    code, _, stderr = _finish(planner, 60)
+    assert code == 143 and "stopped by SIGTERM: its slurm jobs are cancelled" in stderr, stderr
+    assert stderr.strip().splitlines()[-1].startswith("surrogate: 'belt' stopped by SIGTERM")
+    planner = _planner("run", study, postgres_url, log)
+    second = _wait_for(
+        lambda: [j for e, _, j in _events(log) if e == "start" and j != first], 120, 0.2
+    )[0]
     planner.kill()
     planner.wait(timeout=30)
-    again = _planner("run", study, postgres_url, log)
-    code, stdout, stderr = _finish(again)
+    code, stdout, stderr = _finish(_planner("run", study, postgres_url, log))
     assert code == 0, stderr
     _verified(stdout)
-    _assert_each_run_once(study, postgres_url, log, struck=0)
+    _assert_each_run_once(study, postgres_url, log, struck=1)
     states = {job_id: state for job_id, state, *_ in _queue("--states=all")}
-    assert states[job] == "COMPLETED"
+    assert (states[first], states[second]) == ("CANCELLED", "COMPLETED")
     shown = subprocess.run(
         [sys.executable, "-m", "surrogate", "status", str(study), "--storage", postgres_url],
         cwd=REPO, capture_output=True, text=True, check=True,
     )  # fmt: skip
     assert "belt/verify: 0 queued, 0 running" in shown.stdout, shown.stdout
-    assert [job, "COMPLETED,"] in [line.split()[:2] for line in shown.stdout.splitlines()], (
-        shown.stdout
-    )
+    rows = [line.split() for line in shown.stdout.splitlines() if line.split()[0].isdigit()]
+    listed = {row[0]: row[1].rstrip(",") for row in rows}
+    assert (listed[first], listed[second]) == ("CANCELLED", "COMPLETED"), shown.stdout
 
 
 # -- what stops the study ---------------------------------------------------------------------
