@@ -225,7 +225,8 @@ def throwaway_slurm() -> Iterator[dict[str, str]]:
 
 def _slurm_conf(folder: Path, node: str) -> str:
     """The single-node cluster of :func:`throwaway_slurm` (KillWait 5 s: a job cancelled or
-    over its limit gets SIGKILL 5 s after SIGTERM, not 30)."""
+    over its limit gets SIGKILL 5 s after SIGTERM, not 30; the scheduler looks at pending
+    jobs every 2 s, not 60, so a job held by a drained node starts soon after a resume)."""
     port = free_port()
     lines = [
         "ClusterName=surrogate-test",
@@ -241,6 +242,7 @@ def _slurm_conf(folder: Path, node: str) -> str:
         "DefMemPerCPU=1000",
         "ReturnToService=2",
         "KillWait=5",
+        "SchedulerParameters=sched_interval=2,bf_interval=2",
         f"SlurmctldPidFile={folder / 'slurmctld.pid'}",
         f"SlurmdPidFile={folder / 'slurmd.pid'}",
         f"SlurmdSpoolDir={folder / 'spool'}",
