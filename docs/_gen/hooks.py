@@ -49,6 +49,7 @@ JSON_RECORDS = {
     "export": "surrogate.identify._export:ExportResult",
     "report": "surrogate.reporting._report:ReportResult",
     "worker": "surrogate.identify._worker:WorkerResult",
+    "status": "surrogate.identify._status:StatusResult",
 }
 
 #: pages another engineer writes in parallel: a placeholder until the file exists

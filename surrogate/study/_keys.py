@@ -55,6 +55,7 @@ SECTIONS: tuple[str, ...] = (
     "preferences",
     "model",
     "budget",
+    "cluster",
 )
 """The sections a study file may have, in the order the reference lists them."""
 
@@ -148,6 +149,27 @@ KEYS: tuple[StudyKey, ...] = (
        "(on top of the cap; 0: use the surrogate's)."),
     _K("budget", "calibration_solver_calls", "integer ≥ 1", 200,
        "Cap on a calibration's full-solver runs (`calibrate --budget` overrides it)."),
+    _K("cluster", "partition", "string", None,
+       "The partition (or `a,b`) of `--launcher slurm`'s jobs. Default: the cluster's."),
+    _K("cluster", "account", "string", None,
+       "The account the jobs are charged to. Default: the user's default account."),
+    _K("cluster", "time_limit_min", "integer ≥ 1", None,
+       "One run's wall-time limit [min]; the worker gives its run back 60 s before it. "
+       "Default: the partition's."),
+    _K("cluster", "cores", "integer ≥ 1", 1,
+       "Tasks of one run's job (`$SLURM_NTASKS` inside it: an MPP solver's ranks)."),
+    _K("cluster", "memory_mb", "integer ≥ 1", None,
+       "Memory of one run's job per node [MB]. Default: what the cluster gives a core."),
+    _K("cluster", "max_jobs", "integer ≥ 1", 8,
+       "The most worker jobs queued or running at once."),
+    _K("cluster", "submit_options", "list of strings", [],
+       "Extra options of the submit command (`sbatch`), after the product's."),
+    _K("cluster", "job_name_prefix", "string", "surrogate-",
+       "Starts every job's name (the planner finds its own jobs by it)."),
+    _K("cluster", "modules", "list of strings", [],
+       "Environment modules loaded (`module load`) before the worker starts."),
+    _K("cluster", "setup", "list of strings", [],
+       "Shell lines run before the worker starts (e.g. `source venv/bin/activate`)."),
 )
 # fmt: on
 """Every key of every section but ``[rig]`` and the solvers' own settings."""

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from .._errors import InputDataError
+from ._cluster import ClusterSettings, cluster_settings
 from ._formats import MeasurementFormat
 from ._keys import keys
 from ._rig import Rig
@@ -90,6 +91,7 @@ class StudySpec:
     effects: tuple[str, ...] = ()
     budget: Budget = field(default_factory=Budget)
     storage: str | None = None
+    cluster: ClusterSettings = field(default_factory=ClusterSettings)  # [cluster], validated
 
     @property
     def low_fidelity(self) -> bool:
@@ -160,6 +162,7 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
         effects=effects,
         budget=budget,
         storage=storage,
+        cluster=cluster_settings(_section(data, "cluster", where), where),
     )
     spec.budget.check_main_job(spec.low_fidelity, f"{where}: budget.max_solver_calls")
     return spec

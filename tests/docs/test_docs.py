@@ -163,16 +163,24 @@ def test_the_loader_checks_keys_against_the_declared_table() -> None:
 
 
 def test_the_declared_defaults_are_the_loaders() -> None:
-    from surrogate.study._keys import KEYS
+    from surrogate.study._cluster import ClusterSettings
+    from surrogate.study._keys import KEYS, keys
     from surrogate.study._spec import Budget, Constraints, Targets, parse_study
 
     spec = parse_study({"study": {"name": "x"}, "targets": {"f60_n": 10.0}})
-    records = {"budget": Budget(), "constraints": Constraints(), "targets": Targets()}
+    records = {
+        "budget": Budget(),
+        "constraints": Constraints(),
+        "targets": Targets(),
+        "cluster": ClusterSettings(),
+    }
     for key in KEYS:
         if key.section in records and key.name in {
             f.name for f in dataclasses.fields(records[key.section])
         }:
-            assert getattr(records[key.section], key.name) == key.default, key
+            value = getattr(records[key.section], key.name)
+            assert (list(value) if isinstance(value, tuple) else value) == key.default, key
+    assert set(keys("cluster")) == {f.name for f in dataclasses.fields(ClusterSettings)}
     declared = {(k.section, k.name): k.default for k in KEYS}
     assert spec.seed == declared["study", "seed"]
     assert spec.solver == declared["solver", "kind"]
