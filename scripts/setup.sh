@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Create .venv/ with the project (editable) and its test tools.
+# Create .venv/ with the project (editable), its test tools and the manual's (mkdocs: the
+# suite builds the manual, tests/docs).
 # Idempotent: a second run only checks that everything is installed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -9,7 +10,7 @@ if [ ! -x .venv/bin/python ]; then
     "$PYTHON" -m venv .venv
 fi
 .venv/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
-.venv/bin/python -m pip install --quiet --disable-pip-version-check -e ".[dev]"
+.venv/bin/python -m pip install --quiet --disable-pip-version-check -e ".[dev,docs]"
 # The built-in solver's kernels and the GP likelihood are compiled by numba on their first
 # call and cached beside the source (surrogate/physics/__pycache__, surrogate/gp/__pycache__):
 # compile them here, once, rather than in the first processes of the first run (the suite's

@@ -59,6 +59,20 @@ calculix_block() {
     fi
 }
 
+# -- Slurm and munge: a real single-node Slurm for the cluster tests (tests/cluster, marker
+# slurm; the tests start and stop their own munged, slurmctld and slurmd, as root) -------
+slurm_block() {
+    if ! [ -x /usr/sbin/slurmctld ] || ! [ -x /usr/sbin/slurmd ] || ! [ -x /usr/sbin/munged ] \
+        || ! command -v sbatch >/dev/null; then
+        _apt_install slurm-wlm munge
+    fi
+    if ! command -v sbatch >/dev/null && [ "${CI:-}" = "true" ]; then
+        echo "system-packages: Slurm is missing and CI requires it (apt-get install slurm-wlm munge as root)" >&2
+        return 1
+    fi
+}
+
 postgresql_block
 chromium_block
 calculix_block
+slurm_block

@@ -45,6 +45,8 @@ _LAZY = {
     "compare": ".calibration",
     "ExportResult": ".identify",
     "export": ".identify",
+    "StatusResult": ".identify",
+    "status": ".identify",
     "ReportResult": ".reporting",
     "report": ".reporting",
     "Effect": ".effects",
@@ -80,6 +82,7 @@ __all__ = [
     "RunResult",
     "SampleSet",
     "SolverError",
+    "StatusResult",
     "StudySpec",
     "SurrogateError",
     "available_effects",
@@ -99,6 +102,7 @@ __all__ = [
     "report",
     "run",
     "simulate",
+    "status",
 ]
 
 __version__ = "0.1.0"

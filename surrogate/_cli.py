@@ -83,6 +83,25 @@ def _add_model_options(parser: argparse.ArgumentParser) -> None:
     _add_plugin(parser)
 
 
+def _add_launcher(parser: argparse.ArgumentParser, runs: str) -> None:
+    """``--launcher NAME`` (a batch scheduler runs ``runs``, one a job) and ``--heartbeat``."""
+    from .cluster import available_launchers
+
+    parser.add_argument(
+        "--launcher",
+        choices=available_launchers(),
+        help=f"a batch scheduler runs {runs}, one run a job, as [cluster] says "
+        "(docs/guides/clusters.md); the storage must be one its nodes reach",
+    )
+    parser.add_argument(
+        "--heartbeat",
+        type=int,
+        default=10,
+        help="heartbeat interval of the workers in s (default 10); a run silent for three "
+        "is retried",
+    )
+
+
 def _print_json(payload: Any) -> None:
     print(json.dumps(payload, allow_nan=True))
 
@@ -398,6 +417,7 @@ def _add_run(commands: _Subparsers) -> argparse.ArgumentParser:
         "0: queue the runs for `surrogate worker` processes elsewhere (default 1)",
     )
     _add_storage_patience(running, "the planner (--jobs N != 1)")
+    _add_launcher(running, "every verification")
     _add_json(running)
     return running
 
@@ -417,6 +437,8 @@ def _run(args: argparse.Namespace) -> int:
         jobs=args.jobs,
         **_patience(args),
         progress=not args.json,
+        launcher=args.launcher,
+        heartbeat_s=args.heartbeat,
     )
     if args.json:
         _print_json(result.to_json())
@@ -460,6 +482,7 @@ def _add_calibrate(commands: _Subparsers) -> argparse.ArgumentParser:
         "--budget", type=int, help="override [budget] calibration_solver_calls (full-solver runs)"
     )
     cal.add_argument("--jobs", type=int, default=1, help="solver processes per verification")
+    _add_launcher(cal, "every run of the external full solver")
     _add_json(cal)
     return cal
 
@@ -475,6 +498,8 @@ def _calibrate(args: argparse.Namespace) -> int:
         max_solver_calls=args.budget,
         jobs=args.jobs,
         progress=not args.json,
+        launcher=args.launcher,
+        heartbeat_s=args.heartbeat,
     )
     if args.json:
         _print_json(result.to_json())
@@ -699,6 +724,7 @@ def _add_diagnose(commands: _Subparsers) -> argparse.ArgumentParser:
         help="processes for the candidates' refits and an external solver's runs of one "
         "verification (default: all CPUs)",
     )
+    _add_launcher(diag, "every run of the external full solver (the refits stay here)")
     _add_json(diag)
     return diag
 
@@ -714,6 +740,8 @@ def _diagnose(args: argparse.Namespace) -> int:
         storage=args.storage,
         jobs=args.jobs,
         progress=not args.json,
+        launcher=args.launcher,
+        heartbeat_s=args.heartbeat,
     )
     spec = load_study(args.study)
     plot = write_ladder_plot(result.ladder, spec.directory / f"{spec.name}-compare" / "ladder.png")
@@ -792,10 +820,23 @@ def _add_worker(commands: _Subparsers) -> argparse.ArgumentParser:
     _add_storage(
         worker,
         help="postgresql://user@host/db, journal:///path/study.log (or a .log path), "
-        "or sqlite:///path.db (one worker only)",
-        required=True,
+        "or sqlite:///path.db (one worker only); default: $SURROGATE_STORAGE",
     )
     worker.add_argument("--jobs", type=int, default=1, help="worker processes here (default 1)")
+    worker.add_argument(
+        "--max-runs",
+        type=int,
+        help="leave after this many runs (each process); runs of other workers then do not "
+        "keep it waiting (a scheduler's job: 1)",
+    )
+    worker.add_argument(
+        "--queue",
+        choices=("verify", "runs"),
+        default="verify",
+        help="verify: the main job's runs (surrogate run); runs: the expensive runs of "
+        "calibrate/diagnose --launcher (default verify)",
+    )
+    _add_plugin(worker)
     worker.add_argument(
         "--heartbeat", type=int, default=10, help="heartbeat interval in s (default 10)"
     )
@@ -825,16 +866,29 @@ def _patience(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _worker(args: argparse.Namespace) -> int:
+    import os
+
+    from .effects import load_plugin
+    from .identify._jobs import STORAGE_VARIABLE
     from .identify._worker import work
 
+    for module in args.plugin:
+        load_plugin(module)
+    storage = args.storage or os.environ.get(STORAGE_VARIABLE)
+    if not storage:
+        raise InputDataError(
+            f"surrogate worker needs --storage URL (or ${STORAGE_VARIABLE}): the planner's storage"
+        )
     result = work(
         args.study,
-        storage=args.storage,
+        storage=storage,
         jobs=args.jobs,
         heartbeat_s=args.heartbeat,
         idle_timeout_s=args.idle_timeout,
         **_patience(args),
         progress=not args.json,
+        max_runs=args.max_runs,
+        queue=args.queue,
     )
     if args.json:
         _print_json(result.to_json())
@@ -845,6 +899,42 @@ def _worker(args: argparse.Namespace) -> int:
         )
     if result.interrupted in ("SIGTERM", "SIGINT"):
         return 128 + int(getattr(signal, result.interrupted))
+    return 0
+
+
+# surrogate status ----------------------------------------------------------------------
+
+
+def _add_status(commands: _Subparsers) -> argparse.ArgumentParser:
+    state = commands.add_parser(
+        "status", help="a study's queued and running runs and their scheduler jobs"
+    )
+    state.add_argument("study", type=Path, help="study file")
+    _add_storage(state, help="Optuna storage URL (default: the study's)")
+    _add_json(state)
+    return state
+
+
+def _status(args: argparse.Namespace) -> int:
+    from .identify._status import status
+
+    result = status(args.study, storage=args.storage)
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(f"study {result.study!r} in {result.storage}")
+    for name, n in result.queues.items():
+        print(
+            f"{name}: {n['queued']} queued, {n['running']} running, {n['finished']} finished "
+            f"({n['ok']} ok, {n['failed']} failed), {n['given_back']} given back and queued again"
+        )
+    if result.jobs:
+        print("jobs" + ("" if result.live else " (as last recorded; the scheduler is not here)"))
+    for job in result.jobs:
+        why = f" ({job['reason']})" if job["reason"] else ""
+        code = "" if job["exit_code"] is None else f", exit code {job['exit_code']}"
+        run = "" if job["run"] is None else f", runs trial {job['run']}"
+        print(f"  {job['job_id']:>8} {job['state']}{why}{code}{run}  [{job['queue']}]")
     return 0
 
 
@@ -863,6 +953,7 @@ _COMMANDS: tuple[tuple[Callable[[_Subparsers], argparse.ArgumentParser], _Handle
     (_add_diagnose, _diagnose),
     (_add_dashboard, _dashboard),
     (_add_worker, _worker),
+    (_add_status, _status),
 )
 """(declare the arguments, handle the command) per command, in the order of ``--help``."""
 

@@ -24,6 +24,7 @@ from pathlib import Path
 import pytest
 
 INSTALL = "run scripts/system-packages.sh as root (Debian: apt-get install postgresql chromium)"
+SLURM_INSTALL = "run scripts/system-packages.sh as root (Debian: apt-get install slurm-wlm munge)"
 
 
 def missing(reason: str) -> None:
@@ -146,6 +147,160 @@ def create_database(server_url: str, name: str) -> str:
     with psycopg.connect(f"{server_url}/postgres", autocommit=True) as connection:
         connection.execute(f'CREATE DATABASE "{name}"')
     return f"{server_url}/{name}"
+
+
+_SLURM_DAEMONS = ("slurmctld", "slurmd", "munged", "mungekey")
+
+
+@contextlib.contextmanager
+def throwaway_slurm() -> Iterator[dict[str, str]]:
+    """Start a real single-node Slurm in a temporary folder; yield ``SLURM_CONF``, the node.
+
+    Debian's ``slurm-wlm`` and ``munge``: a munged of its own (its own key, socket and
+    pid in the folder), a slurmctld with this host as controller and a slurmd with this
+    host as a node of all its CPUs, on free ports, ``proctrack/linuxproc`` and
+    ``task/none`` (no cgroups), state, spool and logs in the folder (as
+    /work/shared/slurm-single-node.sh). Partitions: ``debug`` (the default, no time
+    limit) and ``short`` (at most 1 minute). Needs root (slurmd runs as root). The
+    daemons are stopped by their pids afterwards and the folder deleted.
+    """
+    if os.geteuid() != 0:
+        raise ComponentMissing("a single-node Slurm needs root (slurmd runs as root)")
+    tools = {name: shutil.which(name) or f"/usr/sbin/{name}" for name in _SLURM_DAEMONS}
+    missing_tools = [n for n, p in tools.items() if not os.access(p, os.X_OK)]
+    missing_tools += [n for n in ("sbatch", "squeue", "scontrol", "sinfo") if not shutil.which(n)]
+    if missing_tools:
+        raise ComponentMissing(
+            f"Slurm or munge not installed ({', '.join(missing_tools)}); {SLURM_INSTALL}"
+        )
+    try:
+        munge = pwd.getpwnam("munge")
+    except KeyError:
+        raise ComponentMissing(f"there is no 'munge' user; {SLURM_INSTALL}") from None
+    folder = Path(tempfile.mkdtemp(prefix="surrogate-slurm-"))
+    folder.chmod(0o755)
+    for sub in ("spool", "state", "log", "munge"):
+        (folder / sub).mkdir()
+    os.chown(folder / "munge", munge.pw_uid, munge.pw_gid)
+    (folder / "munge").chmod(0o755)  # munged: its socket's folder open to all
+    conf, node = folder / "slurm.conf", socket.gethostname().split(".")[0]
+    pids = [folder / "slurmd.pid", folder / "slurmctld.pid", folder / "munge" / "munged.pid"]
+    try:
+        key = folder / "munge" / "munge.key"
+        subprocess.run([tools["mungekey"], "-c", "-k", str(key)], check=True, capture_output=True)
+        os.chown(key, munge.pw_uid, munge.pw_gid)
+        conf.write_text(_slurm_conf(folder, node))
+        subprocess.run(
+            [
+                "runuser",
+                "-u",
+                "munge",
+                "--",
+                tools["munged"],
+                f"--key-file={key}",
+                f"--socket={folder / 'munge' / 'munge.sock'}",
+                f"--pid-file={pids[2]}",
+                f"--seed-file={folder / 'munge' / 'seed'}",
+            ],
+            check=True,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        for daemon in ("slurmctld", "slurmd"):
+            subprocess.run(
+                [tools[daemon], "-f", str(conf)],
+                check=True,
+                capture_output=True,
+                text=True,
+                timeout=60,
+            )
+        environment = {"SLURM_CONF": str(conf)}
+        _wait_idle(environment)
+        yield {**environment, "node": node, "folder": str(folder)}
+    finally:
+        _stop_by_pid(pids)
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _slurm_conf(folder: Path, node: str) -> str:
+    """The single-node cluster of :func:`throwaway_slurm` (KillWait 5 s: a job cancelled or
+    over its limit gets SIGKILL 5 s after SIGTERM, not 30; the scheduler looks at pending
+    jobs every 2 s, not 60, so a job held by a drained node starts soon after a resume)."""
+    port = free_port()
+    lines = [
+        "ClusterName=surrogate-test",
+        f"SlurmctldHost={node}",
+        f"SlurmctldPort={port}",
+        f"SlurmdPort={free_port()}",
+        "AuthType=auth/munge",
+        f"AuthInfo=socket={folder / 'munge' / 'munge.sock'}",
+        "ProctrackType=proctrack/linuxproc",
+        "TaskPlugin=task/none",
+        "SelectType=select/cons_tres",
+        "SelectTypeParameters=CR_CPU_Memory",
+        "DefMemPerCPU=1000",
+        "ReturnToService=2",
+        "KillWait=5",
+        "SchedulerParameters=sched_interval=2,bf_interval=2",
+        f"SlurmctldPidFile={folder / 'slurmctld.pid'}",
+        f"SlurmdPidFile={folder / 'slurmd.pid'}",
+        f"SlurmdSpoolDir={folder / 'spool'}",
+        f"StateSaveLocation={folder / 'state'}",
+        f"SlurmctldLogFile={folder / 'log' / 'ctld.log'}",
+        f"SlurmdLogFile={folder / 'log' / 'slurmd.log'}",
+        "JobCompType=jobcomp/filetxt",
+        f"JobCompLoc={folder / 'log' / 'jobcomp.txt'}",
+        "SlurmUser=root",
+        "MpiDefault=none",
+        f"NodeName={node} CPUs={os.cpu_count()} RealMemory=4000 State=UNKNOWN",
+        f"PartitionName=debug Nodes={node} Default=YES MaxTime=INFINITE State=UP",
+        f"PartitionName=short Nodes={node} MaxTime=1 State=UP",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _wait_idle(environment: dict[str, str], timeout_s: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        done = subprocess.run(
+            ["sinfo", "-h", "-o", "%t"],
+            capture_output=True,
+            text=True,
+            env={**os.environ, **environment},
+        )
+        if "idle" in done.stdout:
+            return
+        time.sleep(0.5)
+    raise ComponentMissing(f"Slurm's node did not become idle within {timeout_s:g} s")
+
+
+def _stop_by_pid(pid_files: list[Path], timeout_s: float = 30.0) -> None:
+    """SIGTERM each daemon of a pid file, then wait for it to end (SIGKILL at the timeout)."""
+    pids = []
+    for path in pid_files:
+        try:
+            pids.append(int(path.read_text().split()[0]))
+        except (OSError, ValueError, IndexError):
+            continue
+    for pid in pids:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, 15)
+    deadline = time.monotonic() + timeout_s
+    for pid in pids:
+        while _alive(pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        if _alive(pid):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, 9)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
 
 
 class Dashboard:

@@ -9,6 +9,7 @@ as trials of ``<name>/calibrate/<model>`` with the result as the study's attribu
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import logging
@@ -25,9 +26,10 @@ from .._errors import InputDataError
 from .._log import show_progress
 from .._pool import check_jobs, one_blas_thread_within
 from .._validate import check_budget
+from ..identify._worker import HEARTBEAT_S
 from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import distributions, quiet_optuna
-from ..storage._storage import check_storage_url, open_storage
+from ..storage._storage import check_heartbeat, check_storage_url, open_storage
 from ..study._lab_files import sources_sha256
 from ..study._space import ParameterSpace
 from ..study._spec import StudySpec
@@ -50,6 +52,7 @@ __all__ = [
     "calibrate",
     "calibration_note",
     "data_hash",
+    "launched_runs",
     "run_calibration",
 ]
 
@@ -109,6 +112,13 @@ class CalibrationResult:
     first-order test at the noise level may not hold there whatever the budget. Empty
     where every run was the deck's own (or the solver does not say: results cached
     before the solver reported it, the built-in solver).
+
+    ``noise_n`` is the noise level σ the misfit is judged against (the replicates'
+    pooled scatter, or ``[measurements] noise_n``); ``effects`` the model's effects;
+    ``rmse_per_test_n`` the RMSE of each test [N]; ``iterations`` the global phase's
+    verifications; ``study`` and ``storage`` the Optuna study
+    ``<name>/calibrate/<model>`` and its storage; ``message`` the sentence the command
+    prints.
     """
 
     params: dict[str, float]
@@ -147,6 +157,8 @@ def calibrate(
     progress: bool = True,
     tests: Sequence[Any] | None = None,
     record: bool = True,
+    launcher: str | None = None,
+    heartbeat_s: int = HEARTBEAT_S,
 ) -> CalibrationResult:
     """Calibrate the coating and the enabled effects against the measured curves.
 
@@ -172,22 +184,61 @@ def calibrate(
         Calibrate on these tests only (used by the diagnosis).
     record : bool
         Keep the verifications as trials of ``<name>/calibrate/<model>``.
+    launcher : str, optional
+        ``slurm``: the external full solver's runs are jobs of the batch scheduler, one
+        run a job, through the run queue ``<name>/runs`` (``jobs`` left at 1; the
+        built-in solver's runs stay here). See :func:`launched_runs`.
+    heartbeat_s : int
+        The jobs' heartbeat interval [s] (a run silent for three is retried).
 
     Returns
     -------
     CalibrationResult
     """
-    return run_calibration(
-        study,
-        effects=effects,
-        plugins=plugins,
-        storage=storage,
-        max_solver_calls=max_solver_calls,
-        jobs=jobs,
-        progress=progress,
-        tests=tests,
-        record=record,
-    )[0]
+    options: dict[str, Any] = {
+        "effects": effects,
+        "plugins": plugins,
+        "storage": storage,
+        "max_solver_calls": max_solver_calls,
+        "jobs": jobs,
+        "progress": progress,
+        "tests": tests,
+        "record": record,
+    }
+    with launched_runs(study, launcher, storage, jobs, heartbeat_s, plugins, progress) as queue:
+        return run_calibration(study, **options, queue=queue)[0]
+
+
+def launched_runs(
+    study: str | Path | StudySpec,
+    launcher: str | None,
+    storage: str | None,
+    jobs: int | None,
+    heartbeat_s: int,
+    plugins: Sequence[str],
+    progress: bool,
+) -> Any:
+    """The run queue a command's expensive runs go through with ``--launcher``
+    (:class:`surrogate.identify._runs.QueuedRuns`, a context manager), else a context
+    of None; refused in one line before anything is written (``--jobs`` set, the
+    built-in full solver, a launcher that refuses the jobs, a storage its nodes do not
+    reach)."""
+    if launcher is None:
+        return contextlib.nullcontext()
+    from ..identify._runs import prepare_queued_runs
+    from ..study._spec import load_study
+
+    check_heartbeat(heartbeat_s)
+    if jobs not in (None, 1):
+        raise InputDataError(
+            f"--jobs {jobs} with --launcher {launcher}: the scheduler's jobs run the expensive "
+            "runs (at most [cluster] max_jobs at once); drop --jobs"
+        )
+    spec = study if isinstance(study, StudySpec) else load_study(study)
+    url = check_storage_url(storage or spec.default_storage())
+    return prepare_queued_runs(
+        launcher, spec, url, heartbeat_s=heartbeat_s, plugins=plugins, progress=progress
+    )
 
 
 def run_calibration(
@@ -205,6 +256,7 @@ def run_calibration(
     expensive: bool = True,
     certify: bool = True,
     start: Mapping[str, float] | None = None,
+    queue: Any = None,
 ) -> tuple[CalibrationResult, CalibrationLoop]:
     """:func:`calibrate`, and the loop it ran (the diagnosis reads its correction).
 
@@ -215,7 +267,8 @@ def run_calibration(
     the corrected model's first-order test passed is not tested again by the expensive
     solver (the diagnosis's calibrations, whose runs name the effect); ``start`` (a study
     with the built-in solver only): the local phase begins there, no global phase (the
-    diagnosis's recalibration of the model in a better basin it found).
+    diagnosis's recalibration of the model in a better basin it found). ``queue`` solves
+    the expensive solver's runs (:func:`launched_runs`).
     """
     check_jobs(jobs)
     check_budget(max_solver_calls)  # bad options fail before anything is read or written
@@ -230,12 +283,12 @@ def run_calibration(
     name = calibration_study_name(spec, chosen)
     loop: CalibrationLoop
     if not spec.low_fidelity:
-        runs = SolverRuns(problem, cache, jobs=jobs)
+        runs = SolverRuns(problem, cache, jobs=jobs, queue=queue)
         loop = CalibrationLoop(
             problem, runs, noise=noise, budget=budget, progress=progress, label=name
         )
     elif expensive:
-        runs = SolverRuns(problem, cache, jobs=jobs)
+        runs = SolverRuns(problem, cache, jobs=jobs, queue=queue)
         loop = CorrectedCalibration(
             problem,
             runs,

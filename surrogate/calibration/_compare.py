@@ -72,6 +72,11 @@ class CompareResult:
     ``beaten_by``: a verified point of the same model and data in its study that fits
     better (another basin, e.g. an earlier run's: ``{trial, rmse_n, params}``; None where
     none does — the message then says so in one line); ``None`` for given parameters.
+
+    ``params`` and ``effects`` are the model compared; ``rmse_n`` its RMSE over every
+    measured point, ``noise_n`` the noise level and ``rmse_over_noise`` their ratio;
+    ``study`` the calibration study the figures are attached to; ``message`` the summary
+    line the command prints.
     """
 
     params: dict[str, float]

@@ -53,6 +53,7 @@ from .._errors import InputDataError
 from .._log import show_progress
 from .._pool import check_jobs, cpu_jobs, imap_unordered, one_blas_thread_within, worker_count
 from ..effects import available_effects, get_effect, look_alikes
+from ..identify._worker import HEARTBEAT_S
 from ..solvers import get_solver
 from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import quiet_optuna
@@ -62,6 +63,7 @@ from ._calibrate import (
     beaten_by,
     calibration_note,
     declared_bound_sides,
+    launched_runs,
     run_calibration,
     unconverged_reason,
 )
@@ -121,6 +123,13 @@ class DiagnosisResult:
     all the same, and only a confirmed effect is named). ``solver_calls`` counts the
     expensive runs.
 
+    ``rmse_n``, ``heldout_rmse_n`` and ``noise_n`` are the current model's RMSE, its
+    leave-one-test-out RMSE and the noise level; ``systematic`` whether the F-test
+    against the noise rejects (``p_value``); ``where`` the tests, angle bands and
+    condition values where it fails; ``unexplained`` the column the residual follows
+    when no effect of the library explains it (else None); ``verdict`` the sentence the
+    command prints; ``effects`` the current model's effects.
+
     ``rebased``: each time the basin check found the current model's calibration not at
     its best — the model refitted from a leader's optimum with the leader switched off
     (its parameters at their off values) fitted better than the calibration — with
@@ -161,6 +170,8 @@ def diagnose(
     candidates: Sequence[str] | None = None,
     jobs: int | None = None,
     progress: bool = True,
+    launcher: str | None = None,
+    heartbeat_s: int = HEARTBEAT_S,
 ) -> DiagnosisResult:
     """Calibrate the model, test its misfit against the noise, rank missing effects.
 
@@ -177,8 +188,30 @@ def diagnose(
         expensive runs of one verification, ≥ 1 (default: the machine's CPUs).
     progress : bool
         Log each step at INFO (logger ``surrogate``; on stderr unless configured).
+    launcher : str, optional
+        ``slurm``: the expensive solver's runs (the model's calibration, the leaders'
+        confirmations) are jobs of the batch scheduler through the run queue
+        ``<name>/runs``; the built-in solver's runs and the refits stay here
+        (:func:`surrogate.calibration._calibrate.launched_runs`).
+    heartbeat_s : int
+        The jobs' heartbeat interval [s].
     """
     check_jobs(jobs, every_cpu=True)  # a bad value fails before any work
+    with launched_runs(study, launcher, storage, None, heartbeat_s, plugins, progress) as queue:
+        return _diagnose(study, effects, plugins, storage, candidates, jobs, progress, queue)
+
+
+def _diagnose(
+    study: Any,
+    effects: Sequence[str] | None,
+    plugins: Sequence[str],
+    storage: str | None,
+    candidates: Sequence[str] | None,
+    jobs: int | None,
+    progress: bool,
+    queue: Any,
+) -> DiagnosisResult:
+    """:func:`diagnose`, its expensive runs solved by ``queue`` (None: here)."""
     if progress:
         show_progress()
     spec, data, chosen, noise = load_calibration(study, effects, plugins)
@@ -189,7 +222,13 @@ def diagnose(
     # built-in solver's (milliseconds) stay in this process
     expensive_jobs = cpu_jobs(jobs) if spec.low_fidelity else 1
     fitted, loop = run_calibration(
-        spec, effects=chosen, storage=url, jobs=expensive_jobs, progress=progress, certify=False
+        spec,
+        effects=chosen,
+        storage=url,
+        jobs=expensive_jobs,
+        progress=progress,
+        certify=False,
+        queue=queue,
     )
     problem = CalibrationProblem(spec, data, chosen)
     say = _Say(progress, f"{spec.name}/diagnose")
@@ -232,6 +271,7 @@ def diagnose(
             expensive_jobs=expensive_jobs,
             say=say,
             correction=correction,
+            queue=queue,
         )
         refits.refit_all(names)
         current = refits.current if correction is None else _verified_refit(problem, loop, noise)
@@ -551,9 +591,11 @@ class _Refits:
         expensive_jobs: int = 1,
         say: _Say,
         correction: CurveCorrection | None = None,
+        queue: Any = None,
     ) -> None:
         self.problem, self.chosen, self.noise, self.params = problem, chosen, noise, params
         self.jobs, self.say, self.correction = jobs, say, correction
+        self.queue = queue  # solves the expensive runs of the confirmations (--launcher)
         self.expensive_jobs = expensive_jobs
         self.refits: dict[str | None, _Refit] = {}
         self.names: list[str] = []
@@ -735,6 +777,7 @@ class _Refits:
             record=False,
             correction=CurveCorrection(self.correction.Z, self.correction.D),
             certify=False,
+            queue=self.queue,
         )
         self.expensive_calls += found.solver_calls
         if found.multi_fidelity is not None:

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -128,12 +128,25 @@ class VerifiedPoint:
 
 
 class SolverRuns:
-    """Full-solver runs through the result cache; counts what this calibration used."""
+    """Full-solver runs through the result cache; counts what this calibration used.
 
-    def __init__(self, problem: CalibrationProblem, cache_dir: Path, *, jobs: int) -> None:
+    The runs a batch does not find in the cache are solved in ``jobs`` processes, or
+    by ``queue`` (``--launcher``: :class:`surrogate.identify._runs.QueuedRuns`, a
+    scheduler's jobs), which yields ``(index, result)`` as the process pool does.
+    """
+
+    def __init__(
+        self,
+        problem: CalibrationProblem,
+        cache_dir: Path,
+        *,
+        jobs: int,
+        queue: Callable[[list[dict[str, Any]]], Iterable[tuple[int, dict[str, Any]]]] | None = None,
+    ) -> None:
         self.problem = problem
         self.cache = ResultCache(cache_dir)
         self.jobs = jobs
+        self.queue = queue
         self.used: set[str] = set()
         self.X: list[np.ndarray] = []
         self.groups: list[int] = []
@@ -205,7 +218,12 @@ class SolverRuns:
             else:
                 results[i] = hit
         started = time.monotonic()
-        solved = imap_unordered(solve_inputs, [items[i][2] for i in todo], self.jobs)
+        batch = [items[i][2] for i in todo]
+        solved = (
+            imap_unordered(solve_inputs, batch, self.jobs)
+            if self.queue is None
+            else self.queue(batch)
+        )
         for done, (j, result) in enumerate(solved, 1):
             i = todo[j]
             self.cache.put(keys[i], items[i][2], result)

@@ -12,6 +12,8 @@ The flow, one module a step:
   queues, tells and reads back trials; used by the in-process verifier and by
 - :mod:`._worker` (``worker``, ``run --jobs N``): processes on any machine that
   claim queued trials through the storage, with heartbeats and retries;
+- :mod:`._runs`: the run queue ``<name>/runs`` of ``calibrate``/``diagnose --launcher``;
+  :mod:`._jobs`: the worker jobs a launcher runs; :mod:`._status` (``status``);
 - :mod:`._identifiability`: what a scalar target determines;
 - :mod:`._export`: the verified optimum as an LS-DYNA card.
 """
@@ -33,6 +35,8 @@ _LAZY = {
     "run": "._loop",
     "WorkerResult": "._worker",
     "work": "._worker",
+    "StatusResult": "._status",
+    "status": "._status",
 }
 
 __all__ = [
@@ -41,12 +45,14 @@ __all__ = [
     "FitResult",
     "PredictResult",
     "RunResult",
+    "StatusResult",
     "WorkerResult",
     "doe",
     "export",
     "fit",
     "predict",
     "run",
+    "status",
     "work",
 ]
 

@@ -32,7 +32,13 @@ __all__ = ["DoeResult", "FitResult", "PredictResult", "doe", "fit", "fit_surroga
 
 @dataclass(frozen=True)
 class DoeResult:
-    """Keys of ``surrogate doe --json``."""
+    """Keys of ``surrogate doe --json``.
+
+    ``design`` is the design's kind and ``n_points`` its points; ``out`` the CSV
+    written; ``ran`` whether the points were run (``--run``), ``n_ok`` and ``n_failed``
+    the runs that gave a curve and those that failed (each a row with its reason),
+    ``solver_calls`` the runs solved and ``cached`` those taken from the result cache.
+    """
 
     design: str
     n_points: int
@@ -49,7 +55,12 @@ class DoeResult:
 
 @dataclass(frozen=True)
 class FitResult:
-    """Keys of ``surrogate fit --json``: the cross-validation of each output."""
+    """Keys of ``surrogate fit --json``: the cross-validation of each output.
+
+    ``f60_n`` and ``theta_sat_deg`` are the leave-one-out figures of each GP (its error
+    and the coverage of its 95 % intervals); ``n_train`` the runs fitted; ``model`` the
+    JSON file written (None without ``--out``).
+    """
 
     f60_n: dict[str, float]
     theta_sat_deg: dict[str, float]
@@ -62,7 +73,12 @@ class FitResult:
 
 @dataclass(frozen=True)
 class PredictResult:
-    """Keys of ``surrogate predict --json``."""
+    """Keys of ``surrogate predict --json``.
+
+    ``n_points`` is the points predicted; ``out`` the CSV written (None without
+    ``--out``); ``predictions`` one row a point: the coating, F60 and θsat with their
+    standard deviations.
+    """
 
     n_points: int
     out: str | None

@@ -60,6 +60,11 @@ class ExportResult:
     ``not_carried`` the enabled effects the card cannot carry. ``trial_number``,
     ``f60_n``, ``theta_sat_deg`` are the run's (None for a calibration),
     ``rmse_n`` the calibration's (None for a run); ``output`` the file written.
+
+    ``format`` is the output format (``lsdyna``); ``study`` and ``storage`` the Optuna
+    study read and its storage; ``units`` the deck's units; ``tcoat_convention`` how
+    TCOAT was written (``thickness``, ``bending-only`` or ``ratio``); ``text`` the
+    keyword text.
     """
 
     format: str

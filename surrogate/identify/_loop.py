@@ -9,6 +9,7 @@ in-memory Optuna study per iteration.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 from dataclasses import asdict, dataclass
@@ -26,12 +27,18 @@ from .._pool import one_blas_thread_within
 from .._validate import check_budget, check_seed
 from ..solvers._fidelity import MissCounter, fidelity_record
 from ..storage._optuna import distributions
-from ..storage._storage import STORAGE_PATIENCE_S, check_storage_patience, check_workers
+from ..storage._storage import (
+    STORAGE_PATIENCE_S,
+    check_heartbeat,
+    check_storage_patience,
+    check_workers,
+)
 from ..study._spec import StudySpec, Targets, load_study
 from ._commands import fit_surrogate
 from ._doe import make_design
 from ._fidelity import CorrectedModel, LowFidelity
 from ._identifiability import assess_identifiability
+from ._jobs import prepare_launch
 from ._objective import constraint_values, is_feasible, refuse_model_effects, relative_misfit
 from ._verify import Verification, Verifier, open_verify_study, target_of, verify_study_name
 from ._worker import HEARTBEAT_S, WorkerDispatcher
@@ -64,6 +71,11 @@ class RunResult:
     ``dropped`` (why the correction was not trusted and the single-fidelity loop took
     over, else None) and ``dropped_after`` (expensive runs by then). The identifiability
     exponents then come from the corrected model: no expensive runs after verification.
+
+    ``study`` and ``storage`` name the Optuna study ``<name>/verify`` and its storage
+    URL; ``identifiability`` is what the target determines (``statement``, the exponents
+    of F60 in each parameter and the equally good points); ``iterations`` the search
+    iterations; ``message`` the sentence the command prints.
     """
 
     status: str
@@ -92,6 +104,8 @@ def run(
     jobs: int = 1,
     storage_patience_s: float = STORAGE_PATIENCE_S,
     progress: bool = True,
+    launcher: str | None = None,
+    heartbeat_s: int = HEARTBEAT_S,
 ) -> RunResult:
     """Find coating parameters that meet the study's F60 target.
 
@@ -114,31 +128,60 @@ def run(
         for them and write the result — before it stops (as a worker does).
     progress : bool
         Report each iteration (logger ``surrogate``, on stderr unless configured).
+    launcher : str, optional
+        ``slurm``: every verification is a job of the batch scheduler, one run a job
+        (``[cluster]`` says what a job asks for; :mod:`surrogate.cluster`); ``jobs``
+        must then be left at 1, and the storage one the cluster's nodes reach.
+    heartbeat_s : int
+        Heartbeat interval [s] of the workers (``jobs != 1``, ``launcher``); a run
+        silent for three is retried.
     """
     spec = _with_overrides(study, seed=seed, target=target, budget=budget)
     storage_url = storage or spec.default_storage()
     check_workers(storage_url, jobs)
     check_storage_patience(storage_patience_s)
+    check_heartbeat(heartbeat_s)
+    if launcher is not None and jobs != 1:
+        raise InputDataError(
+            f"--jobs {jobs} with --launcher {launcher}: the scheduler's jobs run the "
+            "verifications (at most [cluster] max_jobs at once); drop --jobs"
+        )
+    launch = prepare_launch(
+        launcher,
+        spec,
+        storage_url,
+        queue="verify",
+        heartbeat_s=heartbeat_s,
+        storage_patience_s=storage_patience_s,
+    )
+    jobs = 0 if launch is not None else jobs  # the planner solves nothing itself
     if progress:
         show_progress()
-    heartbeat_s = None if jobs == 1 else HEARTBEAT_S
-    verifier = Verifier(
-        spec,
-        open_verify_study(spec, storage_url, heartbeat_s=heartbeat_s),
-        progress=progress,
-        dispatch=None
-        if jobs == 1
-        else WorkerDispatcher(
+    verify_study = open_verify_study(
+        spec, storage_url, heartbeat_s=None if jobs == 1 else heartbeat_s
+    )
+    dispatcher = None
+    if jobs != 1:
+        dispatcher = WorkerDispatcher(
             spec,
             storage_url,
             jobs=jobs,
+            heartbeat_s=heartbeat_s,
             storage_patience_s=storage_patience_s,
             progress=progress,
-        ),
-        replay=True,
-    )
+        )
+        if launch is not None:
+            dispatcher.fleet = launch.fleet(
+                verify_study,
+                patience=dispatcher.patience,
+                heartbeat_s=heartbeat_s,
+                progress=progress,
+            )
+    verifier = Verifier(spec, verify_study, progress=progress, dispatch=dispatcher, replay=True)
     fidelity = _Fidelity(LowFidelity(spec)) if spec.low_fidelity else None
-    iterations = _search_and_verify(spec, verifier, fidelity)
+    fleet = dispatcher.fleet if dispatcher is not None else None
+    with fleet if fleet is not None else contextlib.nullcontext():
+        iterations = _search_and_verify(spec, verifier, fidelity)
     calls_to_verify = verifier.calls if verifier.chosen() is not None else None
     verifier.finish()
     return _result(spec, verifier, storage_url, iterations, calls_to_verify, fidelity)

@@ -41,13 +41,21 @@ from ..storage._dashboard import attach_run_report
 from ..storage._optuna import quiet_optuna, suggest
 from ..storage._storage import MAX_RETRY, Patience, open_storage, retry_callback, storage_errors
 from ..study._spec import StudySpec, Targets
-from ._objective import constraint_values, is_feasible, meets_target, relative_misfit
+from ._objective import (
+    constraint_values,
+    is_feasible,
+    meets_target,
+    refuse_model_effects,
+    relative_misfit,
+)
 
 if TYPE_CHECKING:  # pandas loads with the surrogate's training set, not in a worker
     from ..study._samples import SampleSet
 
 __all__ = [
     "METRIC",
+    "VERIFY",
+    "Queue",
     "Verification",
     "Verifier",
     "as_planned",
@@ -106,6 +114,45 @@ class Dispatch(Protocol):
     def __call__(
         self, study: optuna.Study, points: list[dict[str, float]], phase: str
     ) -> dict[str, Verification]: ...
+
+
+class Queue(Protocol):
+    """The rules of one queue study that the worker loop and the dispatcher follow
+    (:mod:`surrogate.identify._worker`): the verify study's (:data:`VERIFY`) and the run
+    queue's (:data:`surrogate.identify._runs.RUNS`). A record has ``ok`` and ``reason``."""
+
+    name: str
+
+    def study_name(self, spec: StudySpec) -> str: ...
+
+    def check(self, spec: StudySpec) -> None: ...
+
+    def planned(self, spec: StudySpec, attrs: Mapping[str, Any]) -> StudySpec: ...
+
+    def missing(self, spec: StudySpec, storage: str) -> str: ...
+
+    def inputs(
+        self, spec: StudySpec, trial: optuna.Trial
+    ) -> tuple[dict[str, float], dict[str, Any]]: ...
+
+    def enqueue(
+        self, study: optuna.Study, spec: StudySpec, items: Any, phase: str
+    ) -> list[str]: ...
+
+    def tell(
+        self,
+        study: optuna.Study,
+        trial: optuna.Trial,
+        spec: StudySpec,
+        params: dict[str, float],
+        result: dict[str, Any],
+    ) -> Any: ...
+
+    def record_of(self, trial: FrozenTrial) -> Any: ...
+
+    def finished(self, study: optuna.Study, keys: Iterable[str]) -> dict[str, Any]: ...
+
+    def describe(self, record: Any) -> str: ...
 
 
 def verify_study_name(spec: StudySpec) -> str:
@@ -233,11 +280,7 @@ def enqueue(
 
     Returns the input hashes of ``points`` in order (one per point).
     """
-    known = {
-        t.user_attrs.get("input_hash")
-        for t in study.get_trials(deepcopy=False)
-        if t.state != TrialState.FAIL or "reason" in t.user_attrs or retry_pending(t)
-    }
+    known = known_keys(study)
     keys = []
     for point in points:
         params = {name: float(point[name]) for name in spec.space.names}
@@ -247,6 +290,16 @@ def enqueue(
             known.add(key)
         keys.append(key)
     return keys
+
+
+def known_keys(study: optuna.Study) -> set[str | None]:
+    """The input hashes of the study's runs that are queued, running or done — every run
+    but one abandoned (failed with no copy to come): what a queue does not queue again."""
+    return {
+        t.user_attrs.get("input_hash")
+        for t in study.get_trials(deepcopy=False)
+        if t.state != TrialState.FAIL or "reason" in t.user_attrs or retry_pending(t)
+    }
 
 
 def _trial_attrs(spec: StudySpec, key: str, phase: str) -> dict[str, str]:
@@ -350,8 +403,16 @@ def record_of(trial: FrozenTrial) -> Verification:
     )
 
 
-def finished_records(study: optuna.Study, keys: Iterable[str]) -> dict[str, Verification]:
-    """The record of every key whose run is over (done, failed or abandoned)."""
+def finished_records(
+    study: optuna.Study,
+    keys: Iterable[str],
+    *,
+    read: Callable[[FrozenTrial], Any] = record_of,
+    lost: Callable[[FrozenTrial, str], Any] | None = None,
+) -> dict[str, Any]:
+    """The record of every key whose run is over (done, failed or abandoned): a finished
+    trial ``read``, an abandoned run's ``lost`` (the verify study's records by default;
+    the run queue's, :mod:`._runs`, are its own)."""
     wanted = set(keys)
     by_key: dict[str, list[FrozenTrial]] = {}
     for trial in study.get_trials(deepcopy=False):
@@ -362,13 +423,77 @@ def finished_records(study: optuna.Study, keys: Iterable[str]) -> dict[str, Veri
     for key, trials in by_key.items():
         done = [t for t in trials if t.state == TrialState.COMPLETE or "reason" in t.user_attrs]
         if done:
-            records[key] = record_of(done[-1])
+            records[key] = read(done[-1])
         elif all(t.state == TrialState.FAIL and not retry_pending(t) for t in trials):
-            trial = trials[-1]
-            records[key] = Verification(
-                dict(trial.params), "failed", reason=f"its worker died {MAX_RETRY + 1} times"
+            trial, reason = trials[-1], f"its worker died {MAX_RETRY + 1} times"
+            records[key] = (
+                lost(trial, reason)
+                if lost is not None
+                else Verification(dict(trial.params), "failed", reason=reason)
             )
     return records
+
+
+class VerifyQueue:
+    """The verify study's rules for the worker loop (:class:`surrogate.identify._worker.
+    _Worker`) and the planner's dispatcher; the run queue's are
+    :data:`surrogate.identify._runs.RUNS`."""
+
+    name = "verify"
+
+    def study_name(self, spec: StudySpec) -> str:
+        return verify_study_name(spec)
+
+    def check(self, spec: StudySpec) -> None:
+        refuse_model_effects(spec, "surrogate worker")
+
+    def planned(self, spec: StudySpec, attrs: Mapping[str, Any]) -> StudySpec:
+        return as_planned(spec, attrs)
+
+    def missing(self, spec: StudySpec, storage: str) -> str:
+        return (
+            f"no study {verify_study_name(spec)!r} in {storage}; plan it first: "
+            f"surrogate run {spec.path} --storage {storage} --jobs 0"
+        )
+
+    def inputs(
+        self, spec: StudySpec, trial: optuna.Trial
+    ) -> tuple[dict[str, float], dict[str, Any]]:
+        params = suggest(trial, spec.space)
+        return params, verification_inputs(spec, params)
+
+    def enqueue(
+        self,
+        study: optuna.Study,
+        spec: StudySpec,
+        items: Iterable[Mapping[str, float]],
+        phase: str,
+    ) -> list[str]:
+        return enqueue(study, spec, items, phase=phase)
+
+    def tell(
+        self,
+        study: optuna.Study,
+        trial: optuna.Trial,
+        spec: StudySpec,
+        params: dict[str, float],
+        result: dict[str, Any],
+    ) -> Verification:
+        return tell_verification(study, trial, spec, params, result)
+
+    def record_of(self, trial: FrozenTrial) -> Verification:
+        return record_of(trial)
+
+    def finished(self, study: optuna.Study, keys: Iterable[str]) -> dict[str, Verification]:
+        return finished_records(study, keys)
+
+    def describe(self, record: Verification) -> str:
+        if not record.ok:
+            return f"failed: {record.reason}"
+        return f"F60 {record.f60_n:.4g} N, misfit {100 * record.misfit:.2f} %"
+
+
+VERIFY = VerifyQueue()
 
 
 # -- the in-process verifier ------------------------------------------------------------------

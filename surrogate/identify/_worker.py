@@ -1,5 +1,9 @@
 """``worker``: full-solver verification shared by many processes through a storage.
 
+(The same loop serves the run queue of ``calibrate``/``diagnose --launcher``,
+``--queue runs``, :mod:`._runs`; its rules differ only in :class:`._verify.Queue`.
+A scheduler's job runs a worker with ``--max-runs 1``, :mod:`._jobs`.)
+
 The planner (``surrogate run``) queues each candidate point as a ``WAITING``
 trial of the study ``<name>/verify`` (``study.enqueue_trial`` with the hash of
 its solver inputs); workers on any machine claim a waiting trial (the storage
@@ -21,6 +25,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import signal
 import threading
 import time
@@ -36,9 +41,11 @@ from optuna.trial import TrialState
 from .._errors import InputDataError, Interrupted, SolverError, SurrogateError
 from .._log import show_progress
 from .._pool import check_jobs, one_blas_thread, one_blas_thread_within, process_context
+from ..cluster import Demand, Fleet
+from ..cluster._launcher import JOB_ID_VARIABLE
 from ..solvers._batch import solve_inputs
 from ..solvers._cache import ResultCache, input_hash
-from ..storage._optuna import quiet_optuna, suggest
+from ..storage._optuna import quiet_optuna
 from ..storage._storage import (
     MAX_RETRY,
     STORAGE_PATIENCE_S,
@@ -52,18 +59,7 @@ from ..storage._storage import (
     unreachable,
 )
 from ..study._spec import StudySpec, load_study
-from ._objective import refuse_model_effects
-from ._verify import (
-    Verification,
-    as_planned,
-    enqueue,
-    finished_records,
-    queue_lost_copies,
-    record_of,
-    tell_verification,
-    verification_inputs,
-    verify_study_name,
-)
+from ._verify import VERIFY, Queue, queue_lost_copies
 
 __all__ = ["HEARTBEAT_S", "WorkerDispatcher", "WorkerResult", "work"]
 
@@ -72,6 +68,7 @@ logger = logging.getLogger(__name__)
 Solve = Callable[[dict[str, Any]], dict[str, Any]]
 POLL_S = 0.5
 HEARTBEAT_S = 10
+JOB_ATTR = "job"  # a trial's system attribute: the scheduler's job whose worker claimed it
 
 
 @dataclass(frozen=True)
@@ -81,6 +78,10 @@ class WorkerResult:
     ``runs`` counts the trials this worker (all its processes) finished,
     ``solved`` the solver runs among them (the rest came from the cache);
     ``interrupted`` names the signal that stopped it, if any.
+
+    ``study`` and ``storage`` name the verify study and its storage; ``jobs`` the
+    worker's processes; ``ok`` and ``failed`` the finished trials with and without a
+    curve.
     """
 
     study: str
@@ -101,7 +102,11 @@ class WorkerDispatcher:
     """Verify a batch of points through the storage: queue, work or wait, collect.
 
     ``jobs`` local worker processes run the batch (0: only wait for workers
-    started elsewhere with ``surrogate worker``; 1: this process works).
+    started elsewhere with ``surrogate worker``; 1: this process works); a ``fleet``
+    keeps worker jobs on a batch scheduler while the batch's runs are open
+    (:class:`surrogate.cluster.Fleet`: the command that made it cancels them when it
+    ends). ``queue`` names the rules of the queue study (:class:`._verify.Queue`: the
+    verify study's, or the run queue's of ``calibrate``/``diagnose --launcher``).
     """
 
     def __init__(
@@ -114,22 +119,28 @@ class WorkerDispatcher:
         storage_patience_s: float = STORAGE_PATIENCE_S,
         solve: Solve = solve_inputs,
         progress: bool = True,
+        fleet: Fleet | None = None,
+        queue: Queue = VERIFY,
     ) -> None:
         self.spec = spec
         self.storage = storage
         self.jobs = jobs
+        self.fleet = fleet
+        self.queue = queue
         self.heartbeat_s = heartbeat_s
         self.patience = Patience(storage, storage_patience_s, grace_s=3 * heartbeat_s)
         self.solve = solve
         self.progress = progress
 
     def __call__(
-        self, study: optuna.Study, points: list[dict[str, float]], phase: str
-    ) -> dict[str, Verification]:
-        keys = self.patience(lambda: enqueue(study, self.spec, points, phase=phase))  # repeatable
+        self, study: optuna.Study, points: list[dict[str, Any]], phase: str
+    ) -> dict[str, Any]:
+        """Queue ``points`` (the queue's items: the verify study's points, the run queue's
+        solver inputs), run or wait for them; their records by input hash."""
+        keys = self.patience(lambda: self.queue.enqueue(study, self.spec, points, phase))
         if self.jobs > 0:
             self._work(study, keys, phase)
-        elif self.progress:
+        elif self.progress and self.fleet is None:
             logger.info(
                 "[%s] %s: %d runs queued in %s; waiting for `surrogate worker` processes",
                 self.spec.name,
@@ -150,7 +161,7 @@ class WorkerDispatcher:
         Runs still open after ``MAX_RETRY + 1`` rounds stop the planner with one line."""
 
         def open_runs() -> set[str]:
-            return set(keys) - set(self.patience(lambda: finished_records(study, keys)))
+            return set(keys) - set(self.patience(lambda: self.queue.finished(study, keys)))
 
         died = None
         for _ in range(MAX_RETRY + 1):
@@ -168,6 +179,7 @@ class WorkerDispatcher:
                 storage_reached=True,
                 solve=self.solve,
                 progress=False,
+                queue=self.queue.name,
             )
             if done.interrupted in _SIGNAL_NAMES:
                 raise Interrupted(
@@ -189,15 +201,17 @@ class WorkerDispatcher:
                 "same command again (the runs finished are kept)"
             )
 
-    def _wait(self, study: optuna.Study, keys: list[str], phase: str) -> dict[str, Verification]:
+    def _wait(self, study: optuna.Study, keys: list[str], phase: str) -> dict[str, Any]:
         """Until every run of ``keys`` is over; says what it waits for every heartbeat."""
         wanted, said = set(keys), time.monotonic()
         judge = _StaleJudge(self.patience, self.heartbeat_s)
         while True:
-            records = self.patience(lambda: finished_records(study, wanted))
+            records = self.patience(lambda: self.queue.finished(study, wanted))
             if len(records) == len(wanted):
                 return records
             judge(study)
+            if self.fleet is not None:
+                self.fleet.tend(lambda: self._demand(study), done=len(records))
             if self.progress and time.monotonic() - said >= self.heartbeat_s:
                 said = time.monotonic()
                 open_keys = wanted - records.keys()
@@ -213,6 +227,20 @@ class WorkerDispatcher:
                     states.count(TrialState.RUNNING),
                 )
             time.sleep(POLL_S)
+
+    def _demand(self, study: optuna.Study) -> Demand:
+        """What the queue asks of the fleet: the runs queued (any batch's: a worker takes
+        the oldest), the jobs holding a running run, the runs finished so far."""
+        trials = self.patience(lambda: study.get_trials(deepcopy=False))
+        return Demand(
+            waiting=sum(t.state == TrialState.WAITING for t in trials),
+            holders=frozenset(
+                str(t.system_attrs[JOB_ATTR])
+                for t in trials
+                if t.state == TrialState.RUNNING and JOB_ATTR in t.system_attrs
+            ),
+            finished=sum(t.state == TrialState.COMPLETE for t in trials),
+        )
 
 
 class _StaleJudge:
@@ -252,6 +280,8 @@ def work(
     storage_reached: bool = False,
     solve: Solve = solve_inputs,
     progress: bool = True,
+    max_runs: int | None = None,
+    queue: str = "verify",
 ) -> WorkerResult:
     """Run queued verification trials of ``study`` until none is left.
 
@@ -281,18 +311,34 @@ def work(
         (tests pass a cheap stand-in here; a study file cannot).
     progress : bool
         One line per finished run (logger ``surrogate``, stderr unless configured).
+    max_runs : int, optional
+        Leave after this many runs (each worker process); then runs of other workers do
+        not keep it waiting either (a scheduler's job: one run, ``--max-runs 1``).
+    queue : str
+        ``verify`` (the main job's verify study) or ``runs`` (the run queue of
+        ``calibrate``/``diagnose --launcher``, :mod:`surrogate.identify._runs`).
     """
     spec = study if isinstance(study, StudySpec) else load_study(study)
-    refuse_model_effects(spec, "surrogate worker")
+    rules = queue_named(queue)
+    rules.check(spec)
     check_jobs(jobs)
     check_workers(storage, jobs)
     if not isinstance(idle_timeout_s, int | float) or not idle_timeout_s >= 0:
         raise InputDataError(f"--idle-timeout must be ≥ 0 s, got {idle_timeout_s!r}")
     check_storage_patience(storage_patience_s)
+    if max_runs is not None and (
+        isinstance(max_runs, bool) or not isinstance(max_runs, int) or max_runs < 1
+    ):
+        raise InputDataError(f"--max-runs must be a whole number ≥ 1, got {max_runs!r}")
     quiet_optuna()
     if progress:
         show_progress()
-    options: dict[str, Any] = {"heartbeat_s": heartbeat_s, "patience_s": storage_patience_s}
+    options: dict[str, Any] = {
+        "heartbeat_s": heartbeat_s,
+        "patience_s": storage_patience_s,
+        "max_runs": max_runs,
+        "queue": rules,
+    }
     worker = _Worker(
         spec, storage, **options, reached=storage_reached, solve=solve, progress=progress
     )
@@ -302,7 +348,17 @@ def work(
         worker.close()
         options["reached"] = True  # by this process, just now
         counts = _work_in_processes(spec, storage, jobs, options, idle_timeout_s, solve, progress)
-    return WorkerResult(verify_study_name(spec), storage, jobs, **counts)
+    return WorkerResult(rules.study_name(spec), storage, jobs, **counts)
+
+
+def queue_named(name: str) -> Queue:
+    """The rules of queue ``name`` (``verify``, ``runs``), or a one-line error."""
+    from ._runs import RUNS
+
+    queues: dict[str, Queue] = {VERIFY.name: VERIFY, RUNS.name: RUNS}
+    if name not in queues:
+        raise InputDataError(f"--queue must be one of {', '.join(queues)}, got {name!r}")
+    return queues[name]
 
 
 def _work_in_processes(
@@ -402,8 +458,13 @@ class _Worker:
         reached: bool = False,
         solve: Solve,
         progress: bool,
+        max_runs: int | None = None,
+        queue: Queue = VERIFY,
     ) -> None:
         self.url = storage
+        self.max_runs = max_runs
+        self.queue = queue
+        self.job_id = os.environ.get(JOB_ID_VARIABLE) or None
         self._stop: str | None = None
         self.patience = Patience(
             storage, patience_s, grace_s=3 * heartbeat_s, stopping=lambda: self._stop is not None
@@ -414,22 +475,18 @@ class _Worker:
             opened: Any = optuna.storages.get_storage(
                 open_storage(storage, heartbeat_s=heartbeat_s, must_exist=True)
             )
+            name = queue.study_name(spec)
             try:
                 study = optuna.load_study(
-                    study_name=verify_study_name(spec),
-                    storage=opened,
-                    sampler=optuna.samplers.RandomSampler(),
+                    study_name=name, storage=opened, sampler=optuna.samplers.RandomSampler()
                 )
             except KeyError:
-                raise InputDataError(
-                    f"no study {verify_study_name(spec)!r} in {storage}; plan it first: "
-                    f"surrogate run {spec.path} --storage {storage} --jobs 0"
-                ) from None
-            return opened, study, opened.get_study_id_from_name(verify_study_name(spec))
+                raise InputDataError(queue.missing(spec, storage)) from None
+            return opened, study, opened.get_study_id_from_name(name)
 
         with storage_errors(storage):  # a database never reached is not waited for
             self.storage, self.study, self.study_id = self.patience(start) if reached else start()
-        self.spec = as_planned(spec, self.study.user_attrs)
+        self.spec = queue.planned(spec, self.study.user_attrs)
         self.heartbeat_s = heartbeat_s
         self.solve = solve
         self.progress = progress
@@ -449,20 +506,24 @@ class _Worker:
             engine.dispose()
 
     def loop(self, idle_timeout_s: float) -> dict[str, Any]:
-        """Work until nothing has been queued or running for ``idle_timeout_s``."""
+        """Work until nothing has been queued or running for ``idle_timeout_s`` (with
+        ``max_runs``: until that many runs, or nothing queued for ``idle_timeout_s``)."""
         main_thread = threading.current_thread() is threading.main_thread()
         previous = {sig: signal.signal(sig, self._on_signal) for sig in _SIGNALS if main_thread}
         try:
             with storage_errors(self.url):
                 idle_since = time.monotonic()
                 judge = _StaleJudge(self.patience, self.heartbeat_s)
-                while self._stop is None:
+                taken = 0
+                while self._stop is None and taken != self.max_runs:
                     judge(self.study)
                     trial_id = self._claim()
                     if trial_id is not None:
                         self._run(trial_id)
+                        taken += 1
                         idle_since = time.monotonic()
-                    elif self.patience(self._running):  # idle once nothing is queued or running
+                    elif self.max_runs is None and self.patience(self._running):
+                        # idle once nothing is queued or running
                         idle_since = time.monotonic()
                         time.sleep(POLL_S)
                     elif time.monotonic() - idle_since < idle_timeout_s:
@@ -497,6 +558,12 @@ class _Worker:
                 claim = partial(self.storage.set_trial_state_values, trial_id, TrialState.RUNNING)
                 if self.patience(claim):
                     self.patience(partial(self.storage.record_heartbeat, trial_id))
+                    if self.job_id is not None:  # the planner's fleet: this job holds a run
+                        self.patience(
+                            partial(
+                                self.storage.set_trial_system_attr, trial_id, JOB_ATTR, self.job_id
+                            )
+                        )
                     return trial_id
             except optuna.exceptions.UpdateFinishedTrialError:
                 continue
@@ -512,8 +579,7 @@ class _Worker:
         beat = _HeartbeatThread(self.storage, trial_id, self.heartbeat_s, self.patience)
         beat.start()
         try:
-            params = self.patience(lambda: suggest(trial, self.spec.space))
-            inputs = verification_inputs(self.spec, params)
+            params, inputs = self.patience(lambda: self.queue.inputs(self.spec, trial))
             key = input_hash(inputs)
             queued = trial.user_attrs.get("input_hash", key)
             # another solver version or settings than the planner's: refuse rather than
@@ -532,9 +598,9 @@ class _Worker:
             raise
         beat.stop()
 
-        def tell() -> Verification:
+        def tell() -> Any:
             trial.set_user_attr("input_hash", queued)
-            return tell_verification(self.study, trial, self.spec, params, result)
+            return self.queue.tell(self.study, trial, self.spec, params, result)
 
         try:
             record = self.patience(tell)
@@ -544,7 +610,7 @@ class _Worker:
             if frozen.state == TrialState.RUNNING:
                 raise
             if frozen.state == TrialState.COMPLETE or "reason" in frozen.user_attrs:
-                self._count(trial.number, record_of(frozen))
+                self._count(trial.number, self.queue.record_of(frozen))
             else:
                 self._judged_stale(trial)
             return
@@ -598,16 +664,11 @@ class _Worker:
                 self._stop,
             )
 
-    def _count(self, number: int, record: Verification) -> None:
+    def _count(self, number: int, record: Any) -> None:
         self.counts["runs"] += 1
         self.counts["ok" if record.ok else "failed"] += 1
         if self.progress:
-            text = (
-                f"F60 {record.f60_n:.4g} N, misfit {100 * record.misfit:.2f} %"
-                if record.ok
-                else f"failed: {record.reason}"
-            )
-            logger.info("[%s] trial %d: %s", self.spec.name, number, text)
+            logger.info("[%s] trial %d: %s", self.spec.name, number, self.queue.describe(record))
 
 
 _SIGNALS = (signal.SIGTERM, signal.SIGINT)

@@ -53,6 +53,7 @@ __all__ = [
     "STORAGE_PATIENCE_S",
     "Patience",
     "StorageError",
+    "check_heartbeat",
     "check_storage_patience",
     "check_storage_url",
     "check_workers",
@@ -267,12 +268,8 @@ def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool =
         creating it (a worker joins an existing plan).
     """
     url = check_storage_url(url)
-    if heartbeat_s is not None and (
-        isinstance(heartbeat_s, bool) or not isinstance(heartbeat_s, int) or heartbeat_s < 1
-    ):
-        raise InputDataError(
-            f"--heartbeat must be a whole number of seconds ≥ 1, got {heartbeat_s!r}"
-        )
+    if heartbeat_s is not None:
+        check_heartbeat(heartbeat_s)
     grace = None if heartbeat_s is None else 3 * heartbeat_s
     retry = retry_callback()
     path = journal_path(url)
@@ -299,6 +296,15 @@ def open_storage(url: str, *, heartbeat_s: int | None = None, must_exist: bool =
                 heartbeat_stale_trial_callback=retry if heartbeat_s else None,
                 engine_kwargs=_engine_kwargs(url),
             )
+
+
+def check_heartbeat(heartbeat_s: Any) -> int:
+    """``--heartbeat`` as given, or a one-line error."""
+    if isinstance(heartbeat_s, bool) or not isinstance(heartbeat_s, int) or heartbeat_s < 1:
+        raise InputDataError(
+            f"--heartbeat must be a whole number of seconds ≥ 1, got {heartbeat_s!r}"
+        )
+    return heartbeat_s
 
 
 def retry_callback() -> RetryHeartbeatStaleTrialCallback:

@@ -14,7 +14,9 @@ from pathlib import Path
 from typing import Any
 
 from .._errors import InputDataError
+from ._cluster import ClusterSettings, cluster_settings
 from ._formats import MeasurementFormat
+from ._keys import keys
 from ._rig import Rig
 from ._space import COATING_PARAMETERS, PAPER_SPACE, ParameterSpace, ParameterSpec
 
@@ -22,18 +24,7 @@ __all__ = ["Budget", "Constraints", "StudySpec", "Targets", "load_study"]
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 _UNITS = {"ecoat_gpa": "GPa", "scoat_gpa": "GPa", "tcoat_mm": "mm"}
-_SECTIONS = (
-    "study",
-    "solver",
-    "rig",
-    "parameters",
-    "targets",
-    "measurements",
-    "constraints",
-    "preferences",
-    "model",
-    "budget",
-)
+_SECTIONS = keys("")  # every key of a study file: ._keys
 
 
 @dataclass(frozen=True)
@@ -100,6 +91,7 @@ class StudySpec:
     effects: tuple[str, ...] = ()
     budget: Budget = field(default_factory=Budget)
     storage: str | None = None
+    cluster: ClusterSettings = field(default_factory=ClusterSettings)  # [cluster], validated
 
     @property
     def low_fidelity(self) -> bool:
@@ -170,6 +162,7 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
         effects=effects,
         budget=budget,
         storage=storage,
+        cluster=cluster_settings(_section(data, "cluster", where), where),
     )
     spec.budget.check_main_job(spec.low_fidelity, f"{where}: budget.max_solver_calls")
     return spec
@@ -177,7 +170,7 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
 
 def _study(section: dict[str, Any], where: str) -> tuple[str, int, str | None]:
     """``[study]``: the name, the seed and the storage URL (None: next to the file)."""
-    _only(section, ("name", "seed", "storage"), where, "study")
+    _only(section, keys("study"), where, "study")
     name = section.get("name")
     if name is None:
         raise InputDataError(
@@ -196,7 +189,7 @@ def _study(section: dict[str, Any], where: str) -> tuple[str, int, str | None]:
 
 def _preferences(section: dict[str, Any], space: ParameterSpace, where: str) -> tuple[str, ...]:
     """``[preferences] order``: the parameters to keep low among equals, first first."""
-    _only(section, ("order",), where, "preferences")
+    _only(section, keys("preferences"), where, "preferences")
     order = tuple(section.get("order", ("tcoat_mm", "scoat_gpa")))
     for item in order:
         if item not in space.names:
@@ -209,7 +202,7 @@ def _preferences(section: dict[str, Any], space: ParameterSpace, where: str) -> 
 
 def _effects(section: dict[str, Any], where: str) -> tuple[str, ...]:
     """``[model] effects``: the names of the effects to switch on, each once."""
-    _only(section, ("effects",), where, "model")
+    _only(section, keys("model"), where, "model")
     effects = section.get("effects", [])
     if not isinstance(effects, list) or not all(
         isinstance(e, str) and e.isidentifier() for e in effects
@@ -286,8 +279,7 @@ def _positive(value: Any, where: str, key: str) -> float:
 
 
 def _rig(section: dict[str, Any], where: str) -> Rig:
-    allowed = tuple(Rig.__dataclass_fields__)
-    _only(section, allowed, where, "rig")
+    _only(section, keys("rig"), where, "rig")
     try:
         return Rig(**section)
     except InputDataError as error:
@@ -309,7 +301,7 @@ def _space(section: dict[str, Any], where: str) -> ParameterSpace:
                 f"{where}: [parameters] {name} must be "
                 f"{{ low = …, high = …, log = true }}, got {value!r}"
             )
-        _only(value, ("low", "high", "log", "unit"), where, f"parameters.{name}")
+        _only(value, keys("parameters.*"), where, f"parameters.{name}")
         unit = value.get("unit", _UNITS[name])
         if unit != _UNITS[name]:
             raise InputDataError(
@@ -339,7 +331,7 @@ def _space(section: dict[str, Any], where: str) -> ParameterSpace:
 
 def _targets(data: dict[str, Any], where: str) -> Targets:
     section = _section(data, "targets", where)
-    _only(section, ("f60_n", "tolerance", "measurements"), where, "targets")
+    _only(section, keys("targets"), where, "targets")
     f60 = section.get("f60_n")
     f60 = None if f60 is None else _positive(f60, where, "targets.f60_n")
     tolerance = _positive(section.get("tolerance", 0.01), where, "targets.tolerance")
@@ -359,7 +351,7 @@ def _measurements(
     """``[measurements]``: the file (or glob), ``noise_n`` and how the files are read
     (:class:`MeasurementFormat`; relative paths are relative to the study file)."""
     section = _section(data, "measurements", where)
-    _only(section, ("file", "noise_n", "conditions", *_FORMAT_KEYS), where, "measurements")
+    _only(section, keys("measurements"), where, "measurements")
     file = section.get("file", _section(data, "targets", where).get("measurements"))
     noise = section.get("noise_n")
     noise = None if noise is None else _positive(noise, where, "measurements.noise_n")
@@ -397,7 +389,7 @@ def _project_path(value: Any, where: str, key: str, path: Path | None) -> Path:
 
 
 def _constraints(section: dict[str, Any], where: str) -> Constraints:
-    _only(section, ("theta_sat_deg_min", "tcoat_max_fraction_of_thickness"), where, "constraints")
+    _only(section, keys("constraints"), where, "constraints")
     theta = section.get("theta_sat_deg_min", 80.0)
     fraction = section.get("tcoat_max_fraction_of_thickness", 0.1)
     if theta is not None:
@@ -418,19 +410,7 @@ def _constraints(section: dict[str, Any], where: str) -> Constraints:
 
 
 def _budget(section: dict[str, Any], where: str) -> Budget:
-    _only(
-        section,
-        (
-            "initial_samples",
-            "max_solver_calls",
-            "candidates_per_iteration",
-            "surrogate_trials",
-            "identifiability_runs",
-            "calibration_solver_calls",
-        ),
-        where,
-        "budget",
-    )
+    _only(section, keys("budget"), where, "budget")
     default = Budget()
     initial = _int(
         section.get("initial_samples", default.initial_samples),

@@ -2,7 +2,6 @@
 real files, the same measurement set as the shipped long file, and a one-line error for
 each file that cannot be read."""
 
-import doctest
 import hashlib
 import re
 import warnings
@@ -120,16 +119,6 @@ def test_the_guides_file_blocks_are_what_the_files_hold():
         lines, held = shown.splitlines(), (REPO / name).read_text(encoding="utf-8").splitlines()
         starts = [i for i, line in enumerate(held) if line == lines[0]]
         assert any(held[i : i + len(lines)] == lines for i in starts), name
-
-
-def test_the_guides_python_session_runs_as_shown(monkeypatch):
-    """Its ``pycon`` blocks, one session, run from the repository's folder."""
-    monkeypatch.chdir(REPO)
-    session = "\n".join(re.findall(r"```pycon\n(.*?)```", GUIDE.read_text(), re.S))
-    test = doctest.DocTestParser().get_doctest(session, {}, "measurements.md", str(GUIDE), 0)
-    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
-    runner.run(test)
-    assert runner.tries >= 10 and runner.failures == 0
 
 
 # -- formats ---------------------------------------------------------------------------------
