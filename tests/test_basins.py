@@ -26,12 +26,15 @@ NEAR_NOISE = 1.3  # the diagnosis's "explained" (surrogate.calibration._statisti
 
 def _no_basin_search(monkeypatch):
     """The calibration as it was before the search (what the diagnosis's own check and
-    compare's line must catch by themselves)."""
+    compare's line must catch by themselves): no basin search, and no other basin taken
+    from the profiles (their probes elsewhere and their points below the optimum)."""
 
     def skipped(self, model, surrogate_trials):
         self._basins_record(False, "switched off by the test")
 
     monkeypatch.setattr(loop_module.CalibrationLoop, "_search_basins", skipped)
+    monkeypatch.setattr(loop_module.CalibrationLoop, "_elsewhere", lambda self, m, t: [])
+    monkeypatch.setattr(loop_module.CalibrationLoop, "follow_better", lambda self, b: False)
 
 
 def test_a_calibration_in_another_basin_searches_and_reaches_the_noise_floor(tmp_path):

@@ -359,7 +359,7 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
         params=dict(zip(problem.space.names, map(float, best.theta), strict=True)),
         rmse_n=float(best.rmse),
         noise_n=loop.noise,
-        solver_calls=runs.calls,
+        solver_calls=loop.calibration_calls,
         effects=list(effects),
         rmse_per_test_n=best.per_test,
         status="converged" if converged else "budget_exhausted" if spent else "stalled",

@@ -93,6 +93,7 @@ class Determination:
     directions: list[dict[str, Any]]
     statement: str
     profile_solver_calls: int | None = None
+    verification_solver_calls: int | None = None
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -331,6 +332,8 @@ def interval_text(entry: Mapping[str, Any]) -> str:
         return f"≥ {low:.4g}, a lower bound only{reason}{tail}"
     if kind == "upper-bound":
         return f"≤ {high:.4g}, an upper bound only{reason}{tail}"
+    if entry.get("held_by_bounds"):
+        return f"held by the ranges (its parameters at bounds){tail}"
     return f"free within its range{reason}{tail}"
 
 
@@ -528,11 +531,11 @@ def _checked_statement(
     ]
     if coating_two_sided + bounded:
         text += "; " + ", ".join(coating_two_sided + bounded)
+    if any(c["method"] == "unchecked" for c in (*combinations.values(), *intervals.values())):
+        text += "; some ends were not checked (the profiles' budget was spent): linear there"
     for name in linear.held_at_bound:
         k = list(names).index(name)
         text += "; " + at_bound_text(name, int(_held_side(intervals[name], theta[k])), theta[k])
-    if any(c["method"] == "unchecked" for c in (*combinations.values(), *intervals.values())):
-        text += "; some ends were not checked (the profiles' budget was spent): linear there"
     return text
 
 

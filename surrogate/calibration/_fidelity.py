@@ -289,6 +289,7 @@ class CorrectedCalibration(CalibrationLoop):
                     said["left"] += 1
                     continue
                 left -= cost
+                self.profile_calls += cost  # the ends' checks: on top of the calibration's
                 out = self.runs.run(thetas, groups)
                 if any(o is None for o in out):
                     entry["verified"][key] = None
@@ -315,6 +316,7 @@ class CorrectedCalibration(CalibrationLoop):
             combinations=combinations,
             intervals=intervals,
             statement=determination.statement + note,
+            verification_solver_calls=VERIFY_RUNS - left,
         )
 
     def _run(self, surrogate_trials: int) -> None:

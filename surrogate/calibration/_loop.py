@@ -394,6 +394,7 @@ class CalibrationLoop:
         self.intervals = True  # whether run() ends with the profiles of the best fit
         self.determination: Determination | None = None  # of the best fit, profiled
         self._profiled: LocalFit | None = None  # the fit ``determination`` is of
+        self.profile_calls = 0  # runs of ``runs`` the profiles (and their checks) made
         if progress:
             runs.say = self._say
 
@@ -408,7 +409,12 @@ class CalibrationLoop:
         """How many more verifications — a run at every condition group each — fit within
         the budget (``budget``: a phase's own limit instead of the loop's)."""
         limit = self.budget if budget is None else budget
-        return max(0, (limit - self.runs.calls) // self.problem.runs_per_point)
+        return max(0, (limit - self.calibration_calls) // self.problem.runs_per_point)
+
+    @property
+    def calibration_calls(self) -> int:
+        """The runs the calibration made within its budget (the profiles' aside)."""
+        return self.runs.calls - self.profile_calls
 
     def budget_spent(self) -> bool:
         """Whether the budget is what stopped the loop: no further verification fits, or a
@@ -496,6 +502,8 @@ class CalibrationLoop:
             known = [v.theta for v in self.verified] + list(elsewhere)
             profiles, better = profile(model, fit, quantities, known=known)
             spent = runs.calls - before
+            if runs is self.runs:  # the profiles' runs are not the calibration's
+                self.profile_calls += spent
             self.profiled_runs(runs)
             if better is not None and self.follow_better(better):
                 if self.best_fit() is not fit:
