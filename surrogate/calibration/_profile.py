@@ -90,7 +90,6 @@ FD_STEP_Q = 1e-6  # differences of q(x) (algebra, no runs)
 LINEAR_BLIND = 0.5  # a linear end this share of the range away: the linearisation is blind
 FIRST_UNSEEN = 0.05  # the first step of a side the curves do not see at the optimum: this
 # share of the quantity's range (a coat's plastic moment where none yields: zero slope there)
-REFRESHES = 1  # differences of r at a side's step over the threshold, at most (unseen ones)
 NULL_SINGULAR = 1e-3  # a singular value of J below this share of the largest: not seen by
 # the linear prediction of a re-fit (the valley of equally good coats: its 1e-5 share of a
 # well-determined Mp's gradient, the differences' noise, had sent the prediction along it)
@@ -216,10 +215,6 @@ class Profiler:
         self.optimum = _Optimum(x, rss, model.jacobian(x), threshold, rss / dof)
         self.better: np.ndarray | None = None  # a point below the optimum: another basin
         self.seen: list[_Step] = []  # every re-fit so far (of any quantity)
-        singular = np.linalg.svd(self.optimum.jacobian, compute_uv=False)
-        # directions the optimum's curves do not see at all: a side may refresh its slopes once
-        self.unseen = bool(np.any(singular < NULL_SINGULAR * singular.max(initial=0.0)))
-        self.refreshes_left = 0
 
     def know(self, points: Sequence[np.ndarray]) -> None:
         """Parameter points whose runs are done (no new runs: the result cache holds
@@ -262,7 +257,6 @@ class Profiler:
             size = min(far, 2.0 * under.size)
         over: _Step | None = None  # the nearest over it
         interpolated = False  # whether the last step was placed by interpolation
-        self.refreshes_left = REFRESHES if self.unseen else 0
         pending: tuple[_Step, str] | None = None  # an end, and how it was found, to confirm
         for step in range(1, MAX_STEPS + 1):
             try:  # from the farthest point under the threshold: a good fit, a good Jacobian
@@ -478,15 +472,8 @@ class Profiler:
                 continue
             best, best_rss = x, rss
             ratio = (rss - self.optimum.rss) / self.optimum.threshold
-            if ratio <= AGREES[1]:
-                break  # under the threshold or at it: more steps only lower it
-            if self.refreshes_left and evaluations > CONFIRM_EVALUATIONS:
-                # over it where the optimum's curves see some directions not at all (a coat
-                # that does not yield there: Scoat's column is zero): their slopes here
-                self.refreshes_left -= 1
-                jac = model.jacobian(x)
-            elif ratio > FAR_OVER:
-                break  # far over: the others' steps would not bring it under
+            if ratio <= AGREES[1] or ratio > FAR_OVER:
+                break  # under the threshold or at it (more steps only lower it), or far over
             step = _tangent_step(r, jac, self._gradient(quantity, x), x)
             if np.max(np.abs(step)) < 1e-9:
                 break
