@@ -70,6 +70,7 @@ __all__ = [
 _LOG = logging.getLogger(__name__)
 
 AGREES = (0.8, 1.25)  # ΔRSS/Δ at a side's end: found (the end within ~±10 % of its step)
+LINEAR_HOLDS = (0.95, 1.25)  # …and the linear end stands as it is (else moved out, ρ < 1)
 NUISANCE_EVALUATIONS = 3  # residual evaluations of one constrained re-fit
 FIRST_EVALUATIONS = 2  # …of a side's first (the linear end's check)
 FAR_OVER = 25.0  # a re-fit this far over the threshold (ρ) after a step: no more steps
@@ -321,10 +322,16 @@ class Profiler:
         steps: int,
     ) -> ProfileSide:
         """An end whose step beyond rose on: the linear end where the first step checked
-        it, else where the re-fit placed it."""
-        if how == "linear":
+        it (``ρ`` within ``LINEAR_HOLDS``), else where the re-fit placed it — moved out to
+        where a quadratic rise would meet the threshold where it lay under it (``ρ < 1``:
+        the re-fit's ``ρ`` is at most what its nuisance parameters allow, never less, so
+        only the outward move is safe)."""
+        if how == "linear" and LINEAR_HOLDS[0] <= end.ratio <= LINEAR_HOLDS[1]:
             return ProfileSide(linear_end, "linear", end.ratio, steps, end.point(self))
-        return self._ended(quantity, q0, sign, end, steps)
+        size = end.size / math.sqrt(end.ratio) if 0.0 < end.ratio < 1.0 else end.size
+        far = abs(quantity.range_scaled[1 if sign > 0 else 0] - q0)
+        value = self._end_value(quantity, q0, sign, min(size, far))
+        return ProfileSide(value, "profile", end.ratio, steps, end.point(self))
 
     def _bracketed(
         self, quantity: Quantity, q0: float, sign: float, under: _Step, over: _Step, steps: int
