@@ -44,8 +44,8 @@ import surrogate  # noqa: E402
 from benchmarks._machine import machine  # noqa: E402
 from surrogate import Rig  # noqa: E402
 from surrogate.calibration._problem import coat_section  # noqa: E402
-from surrogate.effects import get_effect  # noqa: E402
 from surrogate.calibration._synthetic import coverage_sets, write_calibration_study  # noqa: E402
+from surrogate.effects import get_effect  # noqa: E402
 from surrogate.study._spec import load_study  # noqa: E402
 
 THICKNESS_MM = Rig().thickness_mm
@@ -169,8 +169,8 @@ def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
             if linear
             else None,
         }
-    ratios = [
-        r["profile_solver_calls"] / max(r["solver_calls"] - r["profile_solver_calls"], 1)
+    ratios = [  # the profiles' runs against the calibration's (its ``solver_calls``)
+        r["profile_solver_calls"] / max(r["solver_calls"], 1)
         for r in converged
         if r.get("profile_solver_calls") is not None
     ]

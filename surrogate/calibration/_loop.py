@@ -565,12 +565,21 @@ class CalibrationLoop:
                 "kind": found.kind,
                 "method": found.method,
                 "linear": {k: unchecked[found.name][k] for k in ("low", "high")},
+                # the re-fits each side ended at: the fits the data hardly tell from the
+                # optimum, which a next test should separate (surrogate next-test)
+                "points": {
+                    key: None if side.point is None else self._params(side.point)
+                    for key, side in (("low", found.lower), ("high", found.upper))
+                },
             }
             reason = open_reason(self.problem, fit, found.name, found.kind)
             entries[found.name] = {**entry, **({"reason": reason} if reason else {})}
         return checked(
             linear, self.problem.space.names, fit.theta, entries, _LABELS, solver_calls=spent
         )
+
+    def _params(self, theta: np.ndarray) -> dict[str, float]:
+        return dict(zip(self.problem.space.names, map(float, theta), strict=True))
 
     def p_value(self, fit: LocalFit) -> float:
         """F-test of the fit's misfit against the noise (small: systematic)."""
