@@ -582,6 +582,66 @@ def _compare(args: argparse.Namespace) -> int:
     return 0
 
 
+# surrogate next-test -------------------------------------------------------------------
+
+
+def _add_next_test(commands: _Subparsers) -> argparse.ArgumentParser:
+    nxt = commands.add_parser(
+        "next-test",
+        help="which test inside the study's [design] settles what the data leave open",
+    )
+    nxt.add_argument("study", type=Path, help="study file with [measurements] and [design]")
+    nxt.add_argument(
+        "--goal",
+        help="the quantity to settle, e.g. plastic_moment_n or tcoat_mm "
+        "(default: the least determined one a test settles)",
+    )
+    nxt.add_argument("--count", type=int, default=3, help="recommended tests to list (default 3)")
+    _add_model_options(nxt)
+    _add_storage(nxt)
+    nxt.add_argument("--output", type=Path, help="folder of the PNG figure")
+    nxt.add_argument("--no-plots", action="store_true", help="write no PNG file")
+    _add_json(nxt)
+    return nxt
+
+
+def _next_test(args: argparse.Namespace) -> int:
+    from .design import next_test
+
+    result = next_test(
+        args.study,
+        goal=args.goal,
+        count=args.count,
+        effects=args.effect,
+        plugins=args.plugin,
+        storage=args.storage,
+        output_dir=args.output,
+        plots=not args.no_plots,
+        progress=False,
+    )
+    if args.json:
+        _print_json(result.to_json())
+        return 0
+    print(result.message)
+    goal = result.goal
+    if result.recommended and goal:
+        print(f"{'rank':>4}  {'test':<44} {goal + ' after (95 %)':>30}  also settles")
+        rows = [*enumerate(result.recommended, 1), ("ref", result.reference)]
+        for rank, entry in rows:
+            conditions = ", ".join(
+                f"{k} {v:g}" if not isinstance(v, str) else f"{k} {v}"
+                for k, v in entry["conditions"].items()
+            )
+            span = entry["predicted"][goal]["precision"]
+            others = ", ".join(n for n in entry["settles"] if n != goal) or "—"
+            print(f"{rank!s:>4}  {conditions:<44} {span:>30}  {others}")
+    for note in result.notes:
+        print(f"({note}; {result.candidates} candidate tests, {result.solver_calls} runs)")
+    if result.figure:
+        print(f"figure: {result.figure}")
+    return 0
+
+
 def _parse_params(text: str | None) -> dict[str, float] | None:
     if text is None:
         return None
@@ -951,6 +1011,7 @@ _COMMANDS: tuple[tuple[Callable[[_Subparsers], argparse.ArgumentParser], _Handle
     (_add_export, _export),
     (_add_report, _report),
     (_add_diagnose, _diagnose),
+    (_add_next_test, _next_test),
     (_add_dashboard, _dashboard),
     (_add_worker, _worker),
     (_add_status, _status),

@@ -568,7 +568,9 @@ class CalibrationLoop:
                 # the re-fits each side ended at: the fits the data hardly tell from the
                 # optimum, which a next test should separate (surrogate next-test)
                 "points": {
-                    key: None if side.point is None else self._params(side.point)
+                    key: None
+                    if side.point is None
+                    else {"params": self._params(side.point), "ratio": side.ratio}
                     for key, side in (("low", found.lower), ("high", found.upper))
                 },
             }

@@ -15,6 +15,7 @@ from typing import Any
 
 from .._errors import InputDataError
 from ._cluster import ClusterSettings, cluster_settings
+from ._design import DesignSpec, design_settings
 from ._formats import MeasurementFormat
 from ._keys import keys
 from ._rig import Rig
@@ -92,6 +93,7 @@ class StudySpec:
     budget: Budget = field(default_factory=Budget)
     storage: str | None = None
     cluster: ClusterSettings = field(default_factory=ClusterSettings)  # [cluster], validated
+    design: DesignSpec = field(default_factory=DesignSpec)  # [design], validated
 
     @property
     def low_fidelity(self) -> bool:
@@ -163,6 +165,7 @@ def parse_study(data: dict[str, Any], path: Path | None = None) -> StudySpec:
         budget=budget,
         storage=storage,
         cluster=cluster_settings(_section(data, "cluster", where), where),
+        design=design_settings(_section(data, "design", where), where),
     )
     spec.budget.check_main_job(spec.low_fidelity, f"{where}: budget.max_solver_calls")
     return spec

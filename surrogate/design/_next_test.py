@@ -1,0 +1,716 @@
+"""``next-test``: which test, inside the lab's ``[design]``, settles what the data leave open.
+
+After a calibration (and, where there is one, a diagnosis) of the study's model:
+
+1. **Precision.** Each profile side of the calibration's intervals ended at a re-fit —
+   an alternative fit the measured curves hardly tell from the optimum (at the
+   threshold, or at the range's end of an open side). Each candidate test
+   (:func:`~._candidates.candidate_tests`) is run at the optimum and at every
+   alternative; what its replicates would add between them (:mod:`._information`)
+   moves each side in: the predicted interval of every quantity, in its own units.
+   The goal (``--goal``, else the least determined quantity some candidate settles)
+   ranks the candidates.
+2. **Discrimination.** The diagnosis's leader and those tied with it (else its
+   runner-up), each at its own calibrated point: the candidates where their curves
+   differ by two noise levels, or — where none does — that no test inside
+   ``[design]`` tells them apart.
+3. **Testability.** An effect whose condition never varies in the measurements cannot
+   be tested by them at all: it is listed with the test that would make it testable.
+
+Runs are the built-in solver's (with an external full solver: its prior, the built-in
+model, uncorrected — the correction is not kept in the storage; the message says so).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import optuna
+
+from .._errors import InputDataError
+from .._io import check_output_folder
+from .._log import show_progress
+from .._pool import imap_unordered, one_blas_thread_within
+from ..calibration._calibrate import calibration_note, data_hash
+from ..calibration._compare import latest_calibration
+from ..calibration._loop import profiled_quantities
+from ..calibration._problem import CalibrationProblem, calibration_study_name, load_calibration
+from ..effects import available_effects, get_effect
+from ..solvers._batch import solve_inputs, solver_inputs
+from ..solvers._cache import ResultCache, input_hash
+from ..solvers._fidelity import LOW_FIDELITY
+from ..storage._optuna import quiet_optuna
+from ..storage._storage import check_storage_url, open_storage, refuse_in_memory
+from ._candidates import as_json, candidate_tests, conditions_text
+from ._information import added_chi2, moved_side, separated
+
+__all__ = ["NextTestResult", "next_test"]
+
+SETTLES = 0.9  # a candidate settles a quantity where it cuts its interval's width by 10 %
+# what a test that does not record a condition was run at (the rig's and the effects' own)
+STEP_UNIT = 1e-3  # the test's sensitivities: differences of this share of each range
+PRIOR_UNIT = 0.5  # a Gaussian prior of this share of each range keeps unseen ones finite
+UNRECORDED: dict[str, Any] = {"direction": "warp", "tension_n": 0.0, "rate_deg_s": 90.0}
+
+_LOG = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class NextTestResult:
+    """Keys of ``surrogate next-test --json``.
+
+    ``recommended``: the best ``count`` candidate tests for ``goal``, best first — each
+    its ``conditions``, ``replicates``, ``goal``, ``predicted`` (every quantity's
+    interval after the test, centred on today's fit: ``{value, low, high, kind}``,
+    ``low``/``high`` None on an open side, ``width_now``/``width_after`` in its declared
+    scale and ``precision``, the width in words — the test decides where the interval
+    will lie), ``settles`` (the quantities it narrows by ≥ 10 %) and ``separates``
+    (pairs of effects whose fits its curves tell apart). ``reference``:
+    the same for the replicates of the reference test (the measurements' first), the
+    baseline. ``untestable``: effects whose condition never varies in the data, each
+    ``{effect, reason, test}``; ``inseparable``: pairs no candidate tells apart, each
+    ``{effects, largest_difference_n, at, reason}``. ``candidates`` counts the tests
+    ranked, ``solver_calls`` the built-in runs it took; ``figure`` the PNG of the
+    recommended test's curves; ``notes`` what the ranking ran on.
+    """
+
+    study: str
+    goal: str | None
+    recommended: list[dict[str, Any]]
+    reference: dict[str, Any] | None
+    untestable: list[dict[str, Any]]
+    inseparable: list[dict[str, Any]]
+    candidates: int
+    solver_calls: int
+    figure: str | None
+    message: str
+    notes: list[str] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@one_blas_thread_within
+def next_test(
+    study: Any,
+    *,
+    goal: str | None = None,
+    count: int = 3,
+    effects: Sequence[str] | None = None,
+    plugins: Sequence[str] = (),
+    storage: str | None = None,
+    output_dir: str | Path | None = None,
+    plots: bool = True,
+    progress: bool = True,
+    jobs: int = 1,
+) -> NextTestResult:
+    """Rank the tests inside ``[design]`` by what they would settle.
+
+    Parameters
+    ----------
+    study : path or StudySpec
+        A study with ``[measurements]`` and ``[design]``, calibrated.
+    goal : str, optional
+        The quantity to settle (``plastic_moment_n``, ``tcoat_mm``, an effect's
+        ``effect.param``, …); default: the least determined one a candidate settles.
+    count : int
+        Recommended tests to list (≥ 1).
+    effects : sequence of str, optional
+        The model's effects (default: the study's ``[model] effects``).
+    output_dir : path, optional
+        Folder of the figure (default: the study's).
+    """
+    if not isinstance(count, int) or count < 1:
+        raise InputDataError(f"--count must be a whole number ≥ 1, got {count!r}")
+    if plots and output_dir is not None:
+        check_output_folder(output_dir)
+    if progress:
+        show_progress()
+    spec, data, chosen, noise = load_calibration(study, effects, plugins)
+    if spec.design.empty:
+        raise InputDataError(
+            f"study {spec.name!r} has no [design] section; add what your lab can vary for "
+            "the next test, e.g. [design] bending_length_mm = { low = 5.0, high = 20.0 }"
+        )
+    url = storage or spec.default_storage()
+    check_storage_url(url)
+    refuse_in_memory(url, "`next-test` (it reads the calibration)")
+    name = calibration_study_name(spec, chosen)
+    stored = latest_calibration(url, name)
+    _check_calibration(stored, name)
+    assert stored is not None
+    problem = CalibrationProblem(spec, data, chosen)
+    planner = _Planner(problem, stored, noise, jobs)
+    if goal is not None and goal not in planner.quantities:
+        raise InputDataError(
+            f"--goal {goal!r} is not a quantity of this calibration; use one of "
+            f"{', '.join(planner.quantities)}"
+        )
+    result = planner.rank(goal, count, _diagnosis(url, name), output_dir if plots else False)
+    _record(url, name, result, stored, data_hash(spec))
+    if progress:
+        _LOG.info("[%s] %s", name, result.message)
+    return result
+
+
+def _check_calibration(stored: Mapping[str, Any] | None, name: str) -> None:
+    if stored is None:
+        raise InputDataError(
+            f"no calibration of model {name!r} yet; run `surrogate calibrate` first"
+        )
+    if stored.get("status") != "converged" or not stored.get("determination"):
+        raise InputDataError(
+            f"the last calibration of {name!r} is {stored.get('status')}, not at a verified "
+            "local optimum: what the data leave open is stated only there; calibrate again "
+            "(a larger --budget) first"
+        )
+    if "points" not in next(iter(stored["determination"]["combinations"].values()), {}):
+        raise InputDataError(
+            f"the last calibration of {name!r} has no profile intervals (an older record or "
+            "one whose profiles did not run); calibrate again first"
+        )
+
+
+class _Planner:
+    """The candidates' runs and predictions for one calibrated model."""
+
+    def __init__(
+        self, problem: CalibrationProblem, stored: Mapping[str, Any], noise: float, jobs: int
+    ) -> None:
+        self.problem, self.stored, self.noise, self.jobs = problem, stored, noise, jobs
+        spec = problem.spec
+        self.design = spec.design
+        self.cache = ResultCache(spec.directory / ".solver-cache")
+        self.used: set[str] = set()
+        determination = stored["determination"]
+        self.entries = {**determination["combinations"], **determination["intervals"]}
+        self.quantities = {
+            q.name: q for q in profiled_quantities(problem) if q.name in self.entries
+        }
+        dof = determination["dof"]
+        from scipy import stats
+
+        t = float(stats.t.ppf(0.975, max(dof, 1)))
+        # the threshold in units of σ²: t² · s²/σ² (3.84 where the misfit is the noise)
+        self.threshold = t * t * (determination["sigma_n"] / noise) ** 2
+        self.reference = problem.data.conditions_of(problem.test_ids[0])
+
+    # -- runs ----------------------------------------------------------------------------------
+    def curves(
+        self,
+        fits: Sequence[tuple[Sequence[str], Mapping[str, float]]],
+        tests: Sequence[Mapping[str, Any]],
+    ) -> np.ndarray:
+        """Curves (F, T, A) [N] of each fit (its effects and parameters) at each test's
+        conditions, on the rig's whole degrees (NaN where the solver failed)."""
+        items = []
+        for effects, params in fits:
+            coating = {k: float(v) for k, v in params.items() if "." not in k}
+            by_effect: dict[str, dict[str, float]] = {name: {} for name in effects}
+            for key, value in params.items():
+                if "." in key:
+                    effect, param = key.split(".", 1)
+                    by_effect.setdefault(effect, {})[param] = float(value)
+            for test in tests:
+                items.append(
+                    solver_inputs(
+                        coating,
+                        self.problem.spec.rig,
+                        solver=LOW_FIDELITY,
+                        effects=by_effect or None,
+                        conditions=dict(test),
+                    )
+                )
+        keys = [input_hash(inputs) for inputs in items]
+        results: dict[int, dict[str, Any]] = {}
+        todo = []
+        for i, key in enumerate(keys):
+            hit = self.cache.get(key)
+            if hit is None:
+                todo.append(i)
+            else:
+                results[i] = hit
+        for j, result in imap_unordered(solve_inputs, [items[i] for i in todo], self.jobs):
+            self.cache.put(keys[todo[j]], items[todo[j]], result)
+            results[todo[j]] = result
+        self.used.update(keys)
+        angle = self.problem.angle_deg
+        out = np.full((len(fits) * len(tests), angle.size), np.nan)
+        for i, result in results.items():
+            if result["status"] == "ok":
+                out[i] = np.interp(angle, result["angle_deg"], result["force_n"])
+        return out.reshape(len(fits), len(tests), angle.size)
+
+    # -- the ranking ---------------------------------------------------------------------------
+    def rank(
+        self,
+        goal: str | None,
+        count: int,
+        diagnosis: Mapping[str, Any] | None,
+        output_dir: str | Path | bool | None,
+    ) -> NextTestResult:
+        tests = candidate_tests(self.design, self.reference, seed=self.problem.spec.seed)
+        tests.append(dict(self.reference))  # the baseline: the reference test again
+        chosen = tuple(self.problem.effects)
+        alternatives = self._alternatives()
+        fits = [(chosen, self.stored["params"])] + [(chosen, alt["params"]) for alt in alternatives]
+        curves = self.curves(fits, tests)
+        r = self.design.replicates
+        shrink = self._shrink(tests, r)
+        predicted = [
+            self._predicted(curves[:, k], alternatives, r, shrink[k]) for k in range(len(tests))
+        ]
+        pairs, pair_curves = self._pairs(diagnosis, tests)
+        goal = goal or self._default_goal(predicted[:-1])
+        order = sorted(
+            range(len(tests) - 1),
+            key=lambda k: (
+                predicted[k][goal]["width_after"] if goal else 0.0,
+                sum(p["width_after"] / max(p["width_now"], 1e-300) for p in predicted[k].values()),
+            ),
+        )
+        entry = lambda k: self._entry(tests[k], predicted[k], goal, pairs, pair_curves, k)  # noqa: E731
+        recommended = [entry(k) for k in order[:count]] if goal or pairs else []
+        reference = entry(len(tests) - 1)
+        inseparable = self._inseparable(pairs, pair_curves, tests)
+        untestable = self._untestable()
+        figure = (
+            None
+            if output_dir is False or not recommended
+            else self._figure(tests[order[0]], curves[:, order[0]], alternatives, goal, output_dir)
+        )
+        message = self._message(goal, recommended, reference, untestable, inseparable)
+        return NextTestResult(
+            study=calibration_study_name(self.problem.spec, chosen),
+            goal=goal,
+            recommended=recommended,
+            reference=reference,
+            untestable=untestable,
+            inseparable=inseparable,
+            candidates=len(tests) - 1,
+            solver_calls=len(self.used),
+            figure=figure,
+            message=message,
+            notes=[
+                "ranked on the built-in model"
+                + (
+                    f" (the study's solver is {self.problem.spec.solver}: its correction "
+                    "is not kept in the storage, so the built-in model is uncorrected)"
+                    if self.problem.spec.solver != LOW_FIDELITY
+                    else ""
+                )
+            ],
+        )
+
+    def _alternatives(self) -> list[dict[str, Any]]:
+        """Every profile side's re-fit: ``{quantity, side, params, ratio}``."""
+        found = []
+        for name in self.quantities:
+            for side, point in (self.entries[name].get("points") or {}).items():
+                if point is not None:
+                    found.append({"quantity": name, "side": side, **point})
+        return found
+
+    # -- the information a test adds at the optimum -------------------------------------------
+    def _shrink(
+        self, tests: list[dict[str, Any]], replicates: int
+    ) -> list[dict[str, tuple[float, float]]]:
+        """For each test, each quantity's linear half-width with the test over without it
+        (≤ 1), and the half-width with it in its declared scale — from the measured curves'
+        Jacobian at the optimum and the test's curve sensitivities there (differences of
+        ``STEP_UNIT`` of each range), a Gaussian prior of ``PRIOR_UNIT`` of each range
+        keeping what no curve sees finite: ``{name: (ratio, half)}``."""
+        space, chosen = self.problem.space, tuple(self.problem.effects)
+        theta = np.array([self.stored["params"][n] for n in space.names])
+        unit = space.to_unit(theta[None, :])[0]
+        data = self._data_jacobian(theta, unit)
+        steps = np.where(unit + STEP_UNIT <= 1.0, STEP_UNIT, -STEP_UNIT)
+        shifted = [
+            (
+                chosen,
+                dict(
+                    zip(
+                        space.names,
+                        map(float, space.from_unit((unit + e)[None, :])[0]),
+                        strict=True,
+                    )
+                ),
+            )
+            for e in np.diag(steps)
+        ]
+        at = self.curves([(chosen, self.stored["params"]), *shifted], tests)
+        s2 = self.stored["determination"]["sigma_n"] ** 2
+        before = data.T @ data / s2 + np.eye(unit.size) / PRIOR_UNIT**2
+        gradients = {name: self._unit_gradient(q, unit) for name, q in self.quantities.items()}
+        t = math.sqrt(self.threshold * self.noise**2 / s2)
+        out = []
+        for k in range(len(tests)):
+            sensitivity = np.nan_to_num(((at[1:, k] - at[0, k]) / steps[:, None]).T)  # (A, p)
+            after = before + replicates * sensitivity.T @ sensitivity / s2
+            entry = {}
+            for name, g in gradients.items():
+                now = float(g @ np.linalg.solve(before, g))
+                then = float(g @ np.linalg.solve(after, g))
+                ratio = math.sqrt(then / now) if now > 0 else 1.0
+                entry[name] = (min(ratio, 1.0), t * math.sqrt(max(then, 0.0)))
+            out.append(entry)
+        return out
+
+    def _data_jacobian(self, theta: np.ndarray, unit: np.ndarray) -> np.ndarray:
+        """``∂r/∂u`` of the measured curves at the optimum (its runs are mostly the
+        calibration's, in the result cache)."""
+        from ..calibration._local import ResidualModel
+        from ..calibration._loop import SolverRuns
+
+        runs = SolverRuns(self.problem, self.problem.spec.directory / ".solver-cache", jobs=1)
+        model = ResidualModel(self.problem, runs)
+        model.pin(theta)
+        jac = model.unit_jacobian(unit)
+        self.used.update(runs.used)
+        return jac
+
+    def _unit_gradient(self, quantity: Any, unit: np.ndarray) -> np.ndarray:
+        """``∂q/∂u`` in the quantity's declared scale (central differences of algebra)."""
+        space, gradient = self.problem.space, np.empty(unit.size)
+        for j in range(unit.size):
+            step = np.zeros(unit.size)
+            step[j] = 1e-6
+            up = space.from_unit(np.clip(unit + step, 0, 1)[None, :])[0]
+            down = space.from_unit(np.clip(unit - step, 0, 1)[None, :])[0]
+            gradient[j] = (quantity.scaled(up) - quantity.scaled(down)) / 2e-6
+        return gradient
+
+    def _predicted(
+        self,
+        curves: np.ndarray,
+        alternatives: list[dict[str, Any]],
+        replicates: int,
+        shrink: dict[str, tuple[float, float]],
+    ) -> dict[str, dict[str, Any]]:
+        """Every quantity's interval after the test whose curves (1 + alternatives, A) are
+        given. A closed side shrinks by the test's information at the optimum (the linear
+        half-width with it over without it, ``shrink``); an open side closes where the
+        test rules out its re-fit at the range's end (what it adds there lifts it over the
+        threshold, :func:`~._information.moved_side`), at the linear half-width with the
+        test (a quadratic rise from the optimum to that re-fit would promise more than a
+        yield onset, a threshold, gives)."""
+        model = curves[0]
+        at = {(a["quantity"], a["side"]): k for k, a in enumerate(alternatives, start=1)}
+        out: dict[str, dict[str, Any]] = {}
+        for name, quantity in self.quantities.items():
+            entry = self.entries[name]
+            q0 = quantity.scale(entry["value"])
+            ends: dict[str, float | None] = {}
+            for side, sign in (("low", -1.0), ("high", 1.0)):
+                end = entry[side]
+                size = None if end is None else abs(quantity.scale(end) - q0)
+                k = at.get((name, side))
+                ratio_info, half_after = shrink[name]
+                if size is not None:
+                    size *= ratio_info
+                elif k is not None and np.all(np.isfinite(curves[k])):
+                    alt = alternatives[k - 1]
+                    theta = np.array([alt["params"][n] for n in self.problem.space.names])
+                    reach = abs(quantity.scaled(theta) - q0)
+                    chi2 = added_chi2(model, curves[k], self.noise, replicates)
+                    ratio = 0.0 if alt["ratio"] is None else max(float(alt["ratio"]), 0.0)
+                    if moved_side(reach, ratio, chi2, self.threshold) is not None:
+                        size = min(reach, half_after)
+                ends[side] = None if size is None else quantity.unscaled(q0 + sign * size)
+            now = _width(quantity, entry["low"], entry["high"])
+            after = _width(quantity, ends["low"], ends["high"])
+            out[name] = {
+                "value": entry["value"],
+                "low": ends["low"],
+                "high": ends["high"],
+                "kind": _kind(ends["low"], ends["high"]),
+                "width_now": now,
+                "width_after": min(after, now),
+            }
+            out[name]["precision"] = precision_words(quantity, out[name])
+        return out
+
+    def _default_goal(self, predicted: list[dict[str, dict[str, Any]]]) -> str | None:
+        """The least determined quantity (the widest share of its range) some candidate
+        settles (cuts its width by ``1 − SETTLES``), or None."""
+        settled = [
+            name
+            for name in self.quantities
+            if any(p[name]["width_after"] < SETTLES * p[name]["width_now"] for p in predicted)
+        ]
+        if not settled:
+            return None
+        span = {n: abs(float(np.diff(q.range_scaled)[0])) for n, q in self.quantities.items()}
+        return max(settled, key=lambda n: predicted[0][n]["width_now"] / span[n])
+
+    def _entry(
+        self,
+        test: Mapping[str, Any],
+        predicted: dict[str, dict[str, Any]],
+        goal: str | None,
+        pairs: list[tuple[str, str]],
+        pair_curves: dict[tuple[str, str], np.ndarray],
+        k: int,
+    ) -> dict[str, Any]:
+        r = self.design.replicates
+        separates = [
+            list(pair)
+            for pair in pairs
+            if pair in pair_curves
+            and separated(pair_curves[pair][0, k], pair_curves[pair][1, k], self.noise, r)
+        ]
+        return {
+            "conditions": as_json(test),
+            "replicates": r,
+            "goal": goal,
+            "predicted": predicted,
+            "settles": [
+                n for n, p in predicted.items() if p["width_after"] < SETTLES * p["width_now"]
+            ],
+            "separates": separates,
+        }
+
+    # -- discrimination and testability --------------------------------------------------------
+    def _pairs(
+        self, diagnosis: Mapping[str, Any] | None, tests: list[dict[str, Any]]
+    ) -> tuple[list[tuple[str, str]], dict[tuple[str, str], np.ndarray]]:
+        """The pairs of effects to tell apart (the leader and those tied with it, else the
+        leader and the runner-up) and their fits' curves at every candidate (2, T, A)."""
+        if not diagnosis or not diagnosis.get("systematic") or not diagnosis.get("ranking"):
+            return [], {}
+        ranking = diagnosis["ranking"]
+        leaders = [ranking[0]["effect"], *diagnosis.get("tied_with", [])]
+        if len(leaders) < 2 and len(ranking) > 1:
+            leaders.append(ranking[1]["effect"])
+        by_effect = {e["effect"]: e for e in ranking}
+        pairs = [(a, b) for i, a in enumerate(leaders) for b in leaders[i + 1 :]]
+        base = tuple(self.problem.effects)
+        curves = {}
+        for a, b in pairs:
+            fits = [((*base, a), by_effect[a]["params"]), ((*base, b), by_effect[b]["params"])]
+            curves[(a, b)] = self.curves(fits, tests)
+        return pairs, curves
+
+    def _inseparable(
+        self,
+        pairs: list[tuple[str, str]],
+        pair_curves: dict[tuple[str, str], np.ndarray],
+        tests: list[dict[str, Any]],
+    ) -> list[dict[str, Any]]:
+        r, found = self.design.replicates, []
+        for pair in pairs:
+            a, b = pair_curves[pair][0], pair_curves[pair][1]
+            rms = np.sqrt(np.nanmean((a - b) ** 2, axis=1))
+            if any(separated(a[k], b[k], self.noise, r) for k in range(len(tests))):
+                continue
+            k = int(np.nanargmax(rms))
+            found.append(
+                {
+                    "effects": list(pair),
+                    "largest_difference_n": float(rms[k]),
+                    "at": as_json(tests[k]),
+                    "reason": (
+                        f"no test inside [design] separates `{pair[0]}` and `{pair[1]}` by "
+                        f"two noise levels: their calibrated curves differ by {rms[k]:.2g} N "
+                        f"RMS at most ({conditions_text(tests[k], self.design.conditions)}), "
+                        f"noise {self.noise:.2g} N"
+                    ),
+                }
+            )
+        return found
+
+    def _untestable(self) -> list[dict[str, Any]]:
+        """Effects whose every condition is constant in the measurements, with the test
+        that would vary it."""
+        table = self.problem.data.tests
+        found = []
+        for name in available_effects():
+            if name in self.problem.effects:
+                continue
+            reads = [c for c in get_effect(name).reads if c != "width_mm"]
+            if not reads or any(c in table and table[c].nunique() > 1 for c in reads):
+                continue
+            condition = reads[0]
+            present = condition in table
+            value = table[condition].iloc[0] if present else UNRECORDED.get(condition)
+            seen = f"always {value}" if present else f"not recorded: {value} in every test"
+            found.append(
+                {
+                    "effect": name,
+                    "reason": f"{condition} never varies in the data ({seen})",
+                    "test": self._varying(condition, value),
+                }
+            )
+        return found
+
+    def _varying(self, condition: str, value: Any) -> dict[str, Any] | str:
+        """A test inside ``[design]`` at another value of ``condition``, or what to add."""
+        for r in self.design.ranges:
+            if r.name == condition:
+                far = (
+                    r.high if value is None or abs(r.high - value) >= abs(r.low - value) else r.low
+                )
+                return as_json({**self.reference, condition: far})
+        for name, choices in self.design.choices.items():
+            if name == condition:
+                other = [c for c in choices if c != value]
+                if other:
+                    return as_json({**self.reference, condition: other[0]})
+        return f"add {condition} to [design]: the lab must vary it for the data to test it"
+
+    # -- output ----------------------------------------------------------------------------------
+    def _message(
+        self,
+        goal: str | None,
+        recommended: list[dict[str, Any]],
+        reference: dict[str, Any],
+        untestable: list[dict[str, Any]],
+        inseparable: list[dict[str, Any]],
+    ) -> str:
+        varied = self.design.conditions
+        if goal is None or not recommended:
+            text = "no test inside [design] settles what the data leave open"
+        else:
+            best = recommended[0]
+            now, after = self.entries[goal], best["predicted"][goal]
+            again = reference["predicted"][goal]
+            others = [n for n in best["settles"] if n != goal]
+            text = (
+                f"next test: {conditions_text(best['conditions'], varied)} "
+                f"({best['replicates']} replicates) settles {goal} to "
+                f"{after['precision']} (95 %; now {_interval_words(now)}; "
+                f"{best['replicates']} more of the reference test: {again['precision']})"
+                + (f", and narrows {', '.join(others)}" if others else "")
+            )
+        for item in untestable:
+            test = item["test"]
+            how = (
+                test if isinstance(test, str) else f"a test at {conditions_text(test, tuple(test))}"
+            )
+            text += f"; `{item['effect']}` cannot be tested: {item['reason']} — {how}"
+        for item in inseparable:
+            text += "; " + item["reason"]
+        return text
+
+    def _figure(
+        self,
+        test: Mapping[str, Any],
+        curves: np.ndarray,
+        alternatives: list[dict[str, Any]],
+        goal: str | None,
+        output_dir: str | Path | bool | None,
+    ) -> str | None:
+        """The calibrated curve and the goal's alternative fits at the recommended test,
+        with a band of two noise levels over its replicates' mean (PNG)."""
+        try:
+            import matplotlib
+
+            matplotlib.use("Agg")
+            import matplotlib.pyplot as plt
+        except ImportError:
+            return None
+        spec = self.problem.spec
+        folder = Path(output_dir) if isinstance(output_dir, str | Path) else spec.directory
+        angle = self.problem.angle_deg
+        band = 2 * self.noise / math.sqrt(self.design.replicates)
+        figure, axis = plt.subplots(figsize=(7, 4))
+        axis.fill_between(
+            angle,
+            curves[0] - band,
+            curves[0] + band,
+            color="grey",
+            alpha=0.3,
+            label="calibrated ± 2 noise (mean of the replicates)",
+        )
+        axis.plot(angle, curves[0], "k-", label="calibrated")
+        for k, alt in enumerate(alternatives, start=1):
+            if alt["quantity"] == goal:
+                axis.plot(angle, curves[k], "--", label=f"{goal} at its {alt['side']} end")
+        axis.set(
+            xlabel="rotation [deg]",
+            ylabel="force [N]",
+            title=f"Next test: {conditions_text(test, self.design.conditions)}",
+        )
+        axis.legend(fontsize=8)
+        figure.tight_layout()
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"{spec.name}-next-test.png"
+        figure.savefig(path, dpi=110)
+        plt.close(figure)
+        return str(path)
+
+
+def _width(quantity: Any, low: float | None, high: float | None) -> float:
+    """An interval's width in the quantity's declared scale (an open side: to the range)."""
+    range_low, range_high = quantity.range_scaled
+    a = range_low if low is None else quantity.scale(low)
+    b = range_high if high is None else quantity.scale(high)
+    return max(b - a, 0.0)
+
+
+def _kind(low: float | None, high: float | None) -> str:
+    from ..calibration._determination import interval_kind_of
+
+    return interval_kind_of(low is not None, high is not None)
+
+
+def precision_words(quantity: Any, entry: Mapping[str, Any]) -> str:
+    """A predicted interval by its width, not its place (the test decides where it lies):
+    ``±0.04 %`` of a log-scaled quantity, ``±0.002`` of a linear one; a one-sided bound or
+    free where a side stays open."""
+    if entry["low"] is None or entry["high"] is None:
+        return _interval_words(entry) + (" only" if entry["low"] or entry["high"] else "")
+    half = entry["width_after"] / 2
+    return f"±{100 * math.expm1(half):.2g} %" if quantity.log else f"±{half:.3g}"
+
+
+def _interval_words(entry: Mapping[str, Any]) -> str:
+    low, high = entry["low"], entry["high"]
+    if low is not None and high is not None:
+        return f"{low:.4g} – {high:.4g}"
+    if low is not None:
+        return f"≥ {low:.4g}"
+    if high is not None:
+        return f"≤ {high:.4g}"
+    return "free within its range"
+
+
+def _diagnosis(url: str, name: str) -> dict[str, Any] | None:
+    """The calibration study's stored diagnosis, if any."""
+    try:
+        study = optuna.load_study(study_name=name, storage=open_storage(url))
+    except KeyError:
+        return None
+    return study.user_attrs.get("diagnosis")
+
+
+def _record(
+    url: str, name: str, result: NextTestResult, stored: Mapping[str, Any], data_sha: str
+) -> None:
+    """The recommendation as the calibration study's ``next_test`` attribute (with the
+    data it was made on: the calibration that sees its test states predicted against
+    realised) and the dashboard note."""
+    quiet_optuna()
+    study = optuna.load_study(study_name=name, storage=open_storage(url))
+    record = {**json.loads(json.dumps(result.to_json())), "data_sha256": data_sha}
+    study.set_user_attr("next_test", record)
+    try:
+        from optuna_dashboard import save_note
+    except ImportError:
+        return
+    lines = [f"## Next test: {result.message}", ""]
+    if result.recommended:
+        lines += ["| test | replicates | settles |", "|---|---|---|"]
+        for entry in result.recommended:
+            text = conditions_text(entry["conditions"], tuple(entry["conditions"]))
+            lines.append(
+                f"| {text} | {entry['replicates']} | {', '.join(entry['settles']) or '—'} |"
+            )
+    save_note(study, "\n".join([*lines, "", *calibration_note(stored)]))
