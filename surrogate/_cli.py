@@ -626,7 +626,9 @@ def _next_test(args: argparse.Namespace) -> int:
     goal = result.goal
     if result.recommended and goal:
         print(f"{'rank':>4}  {'test':<44} {goal + ' after (95 %)':>30}  also settles")
-        rows = [*enumerate(result.recommended, 1), ("ref", result.reference)]
+        rows: list[tuple[Any, dict[str, Any]]] = list(enumerate(result.recommended, 1))
+        if result.reference is not None:
+            rows.append(("ref", result.reference))
         for rank, entry in rows:
             conditions = ", ".join(
                 f"{k} {v:g}" if not isinstance(v, str) else f"{k} {v}"

@@ -13,6 +13,7 @@ import contextlib
 import hashlib
 import json
 import logging
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -36,7 +37,14 @@ from ..study._spec import StudySpec
 from ._determination import at_bound_text, interval_text, parameter_interval_text
 from ._fidelity import LOW_FIDELITY_BUDGET, CorrectedCalibration, CorrectedRuns, CurveCorrection
 from ._local import LocalFit, bound_sides
-from ._loop import SETTLED, CalibrationLoop, SolverRuns, VerifiedPoint, determination_at
+from ._loop import (
+    SETTLED,
+    CalibrationLoop,
+    SolverRuns,
+    VerifiedPoint,
+    determination_at,
+    profiled_quantities,
+)
 from ._problem import (
     CalibrationProblem,
     calibration_study_name,
@@ -105,6 +113,11 @@ class CalibrationResult:
     points within a share of the budget; ``optima`` best first). With an external full
     solver, the search ran on the corrected built-in model.
 
+    ``next_test``: where ``surrogate next-test`` recommended a test on earlier data and
+    these measurements hold it, the goal's predicted against its realised interval
+    (``predicted_width``, ``realised_width`` in the goal's declared scale, ``ratio``);
+    the message says so. None otherwise.
+
     ``retried``: the tests whose run at ``params`` the solver finished only after a
     retry (CalculiX: other increments, after the deck's own stopped short), each with why
     the earlier attempts stopped; the message says so. Near such points CalculiX's curves
@@ -139,6 +152,7 @@ class CalibrationResult:
     multi_fidelity: dict[str, Any] | None = None
     retried: dict[str, str] = field(default_factory=dict)
     basins: dict[str, Any] | None = None
+    next_test: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -323,8 +337,74 @@ def run_calibration(
         raise ValueError("a calibration from a start point needs the built-in solver's loop")
     result = _result(loop, chosen, url)
     if record and expensive:
+        checked = next_test_check(url, name, problem, result, data_hash(spec))
+        if checked is not None:
+            result = replace(
+                result, next_test=checked, message=f"{result.message}; {checked['sentence']}"
+            )
         _record(result.storage, name, problem, loop.verified, result, data_hash(spec))
     return result, loop
+
+
+def next_test_check(
+    url: str,
+    name: str,
+    problem: CalibrationProblem,
+    result: CalibrationResult,
+    data_sha: str,
+) -> dict[str, Any] | None:
+    """Where ``surrogate next-test`` recommended a test on other data and the measurements
+    now hold a test at its conditions: the goal's predicted interval against the one this
+    calibration found (``{conditions, goal, predicted_width, realised_width, ratio,
+    sentence}``, widths in the goal's declared scale); else None."""
+    if result.determination is None:
+        return None
+    try:
+        study = optuna.load_study(study_name=name, storage=open_storage(url))
+    except KeyError:
+        return None
+    recorded = study.user_attrs.get("next_test")
+    if not recorded or recorded.get("data_sha256") == data_sha or not recorded["recommended"]:
+        return None
+    best, goal = recorded["recommended"][0], recorded["goal"]
+    entries = {**result.determination["combinations"], **result.determination["intervals"]}
+    quantities = {q.name: q for q in profiled_quantities(problem)}
+    if goal not in entries or goal not in quantities or not _measured(problem, best["conditions"]):
+        return None
+    quantity, entry = quantities[goal], entries[goal]
+    low, high = quantity.range_scaled
+    realised = (high if entry["high"] is None else quantity.scale(entry["high"])) - (
+        low if entry["low"] is None else quantity.scale(entry["low"])
+    )
+    predicted = best["predicted"][goal]["width_after"]
+    ratio = realised / predicted if predicted > 0 else math.inf
+    conditions = ", ".join(f"{k} {v}" for k, v in best["conditions"].items())
+    return {
+        "conditions": best["conditions"],
+        "goal": goal,
+        "predicted_width": predicted,
+        "realised_width": realised,
+        "ratio": ratio,
+        "sentence": (
+            f"the test next-test recommended ({conditions}) was predicted to settle {goal} "
+            f"to {best['predicted'][goal]['precision']}; with it the interval is "
+            f"{interval_text(entry)}, {ratio:.2g} × the predicted width"
+        ),
+    }
+
+
+def _measured(problem: CalibrationProblem, conditions: Mapping[str, Any]) -> bool:
+    """Whether a measured test was run at ``conditions`` (numbers to 1e-6 relative)."""
+    for test_id in problem.test_ids:
+        have = problem.data.conditions_of(test_id)
+        if all(
+            (have.get(k) == v)
+            if isinstance(v, str)
+            else math.isclose(float(have.get(k, math.nan)), float(v), rel_tol=1e-6, abs_tol=1e-9)
+            for k, v in conditions.items()
+        ):
+            return True
+    return False
 
 
 def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> CalibrationResult:

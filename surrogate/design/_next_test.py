@@ -40,6 +40,7 @@ from .._log import show_progress
 from .._pool import imap_unordered, one_blas_thread_within
 from ..calibration._calibrate import calibration_note, data_hash
 from ..calibration._compare import latest_calibration
+from ..calibration._local import FitCoordinates
 from ..calibration._loop import profiled_quantities
 from ..calibration._problem import CalibrationProblem, calibration_study_name, load_calibration
 from ..effects import available_effects, get_effect
@@ -56,6 +57,7 @@ __all__ = ["NextTestResult", "next_test"]
 SETTLES = 0.9  # a candidate settles a quantity where it cuts its interval's width by 10 %
 # what a test that does not record a condition was run at (the rig's and the effects' own)
 STEP_UNIT = 1e-3  # the test's sensitivities: differences of this share of each range
+MOVE_UNIT = 1e-3  # …and of a quantity's own coordinate at an open side's re-fit
 PRIOR_UNIT = 0.5  # a Gaussian prior of this share of each range keeps unseen ones finite
 UNRECORDED: dict[str, Any] = {"direction": "warp", "tension_n": 0.0, "rate_deg_s": 90.0}
 
@@ -264,8 +266,10 @@ class _Planner:
         curves = self.curves(fits, tests)
         r = self.design.replicates
         shrink = self._shrink(tests, r)
+        far = self._far_information(alternatives, tests, r)
         predicted = [
-            self._predicted(curves[:, k], alternatives, r, shrink[k]) for k in range(len(tests))
+            self._predicted(curves[:, k], alternatives, r, shrink[k], far[:, k])
+            for k in range(len(tests))
         ]
         pairs, pair_curves = self._pairs(diagnosis, tests)
         goal = goal or self._default_goal(predicted[:-1])
@@ -363,6 +367,48 @@ class _Planner:
             out.append(entry)
         return out
 
+    def _far_information(
+        self, alternatives: list[dict[str, Any]], tests: list[dict[str, Any]], replicates: int
+    ) -> np.ndarray:
+        """At each open side's re-fit, the linear half-width of its quantity that each test
+        gives there alone (alternatives, tests; inf where it sees nothing, NaN for a closed
+        side): the test closes the side only if it sees the quantity where the side ends,
+        not only at today's optimum (a thicker coat's curves at 5 mm reach no plateau
+        where today's coat does: the one test tells nothing of how large its Mp may be)."""
+        out = np.full((len(alternatives), len(tests)), np.nan)
+        open_sides = [
+            (k, alt)
+            for k, alt in enumerate(alternatives)
+            if self.entries[alt["quantity"]][alt["side"]] is None
+        ]
+        if not open_sides:
+            return out
+        chosen, space = tuple(self.problem.effects), self.problem.space
+        coordinates = FitCoordinates(space, self.problem.spec.rig.thickness_mm)
+        fits, moves = [], []
+        for _, alt in open_sides:
+            theta = np.array([alt["params"][n] for n in space.names])
+            moved = _moved_along(coordinates, space, alt["quantity"], theta)
+            quantity = self.quantities[alt["quantity"]]
+            moves.append(quantity.scaled(moved) - quantity.scaled(theta))
+            fits += [
+                (chosen, alt["params"]),
+                (chosen, dict(zip(space.names, map(float, moved), strict=True))),
+            ]
+        curves = self.curves(fits, tests)
+        s2 = self.stored["determination"]["sigma_n"] ** 2
+        t = math.sqrt(self.threshold * self.noise**2 / s2)
+        for j, ((k, _), move) in enumerate(zip(open_sides, moves, strict=True)):
+            if move == 0.0:
+                out[k] = math.inf
+                continue
+            slope = np.nan_to_num((curves[2 * j + 1] - curves[2 * j]) / move)  # (T, A)
+            information = replicates * np.sum(slope**2, axis=1) / s2
+            out[k] = np.where(
+                information > 0, t / np.sqrt(np.maximum(information, 1e-300)), math.inf
+            )
+        return out
+
     def _data_jacobian(self, theta: np.ndarray, unit: np.ndarray) -> np.ndarray:
         """``∂r/∂u`` of the measured curves at the optimum (its runs are mostly the
         calibration's, in the result cache)."""
@@ -393,6 +439,7 @@ class _Planner:
         alternatives: list[dict[str, Any]],
         replicates: int,
         shrink: dict[str, tuple[float, float]],
+        far: np.ndarray,
     ) -> dict[str, dict[str, Any]]:
         """Every quantity's interval after the test whose curves (1 + alternatives, A) are
         given. A closed side shrinks by the test's information at the optimum (the linear
@@ -421,8 +468,9 @@ class _Planner:
                     reach = abs(quantity.scaled(theta) - q0)
                     chi2 = added_chi2(model, curves[k], self.noise, replicates)
                     ratio = 0.0 if alt["ratio"] is None else max(float(alt["ratio"]), 0.0)
-                    if moved_side(reach, ratio, chi2, self.threshold) is not None:
-                        size = min(reach, half_after)
+                    sees = far[k - 1] < reach  # it sees the quantity where the side ends
+                    if sees and moved_side(reach, ratio, chi2, self.threshold) is not None:
+                        size = min(reach, max(half_after, far[k - 1]))
                 ends[side] = None if size is None else quantity.unscaled(q0 + sign * size)
             now = _width(quantity, entry["low"], entry["high"])
             after = _width(quantity, ends["low"], ends["high"])
@@ -645,6 +693,24 @@ class _Planner:
         figure.savefig(path, dpi=110)
         plt.close(figure)
         return str(path)
+
+
+def _moved_along(coordinates: Any, space: Any, name: str, theta: np.ndarray) -> np.ndarray:
+    """``theta`` moved by ``MOVE_UNIT`` in the coordinate that is the quantity alone: log D,
+    log Mp or Tcoat of the fit coordinates (the others held), Ecoat's or Scoat's own, an
+    effect parameter's own; inwards at an upper bound."""
+    unit = space.to_unit(theta[None, :])[0]
+    fit_axis = {"bending_stiffness_nmm": "ie", "plastic_moment_n": "is_", "tcoat_mm": "it"}
+    if coordinates.coating and name in fit_axis:
+        x = coordinates.from_unit(unit)
+        j = getattr(coordinates, fit_axis[name])
+        x[j] += MOVE_UNIT if x[j] + MOVE_UNIT <= 1.0 else -MOVE_UNIT
+        unit = coordinates.to_unit(x)
+    else:
+        j = list(space.names).index(name)
+        unit = unit.copy()
+        unit[j] += MOVE_UNIT if unit[j] + MOVE_UNIT <= 1.0 else -MOVE_UNIT
+    return space.clip(space.from_unit(unit[None, :])[0])
 
 
 def _width(quantity: Any, low: float | None, high: float | None) -> float:
