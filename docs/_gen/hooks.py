@@ -50,6 +50,7 @@ JSON_RECORDS = {
     "report": "surrogate.reporting._report:ReportResult",
     "worker": "surrogate.identify._worker:WorkerResult",
     "status": "surrogate.identify._status:StatusResult",
+    "next-test": "surrogate.design._next_test:NextTestResult",
 }
 
 #: pages another engineer writes in parallel: a placeholder until the file exists

@@ -555,7 +555,8 @@ class _Planner:
         r, found = self.design.replicates, []
         for pair in pairs:
             a, b = pair_curves[pair][0], pair_curves[pair][1]
-            rms = np.sqrt(np.nanmean((a - b) ** 2, axis=1))
+            squares = (a - b) ** 2
+            rms = np.sqrt(np.where(np.isnan(squares), 0.0, squares).mean(axis=1))
             if any(separated(a[k], b[k], self.noise, r) for k in range(len(tests))):
                 continue
             k = int(np.nanargmax(rms))
