@@ -625,18 +625,22 @@ def _next_test(args: argparse.Namespace) -> int:
     print(result.message)
     goal = result.goal
     if result.recommended and goal:
-        print(f"{'rank':>4}  {'test':<44} {goal + ' after (95 %)':>30}  also settles")
         rows: list[tuple[Any, dict[str, Any]]] = list(enumerate(result.recommended, 1))
         if result.reference is not None:
             rows.append(("ref", result.reference))
-        for rank, entry in rows:
-            conditions = ", ".join(
-                f"{k} {v:g}" if not isinstance(v, str) else f"{k} {v}"
+        tests = [
+            ", ".join(
+                f"{k} {v:.4g}" if not isinstance(v, str) else f"{k} {v}"
                 for k, v in entry["conditions"].items()
             )
+            for _, entry in rows
+        ]
+        wide = max(len(t) for t in tests)
+        print(f"{'rank':>4}  {'test':<{wide}}  {goal + ' after (95 %)':>24}  also settles")
+        for (rank, entry), test in zip(rows, tests, strict=True):
             span = entry["predicted"][goal]["precision"]
             others = ", ".join(n for n in entry["settles"] if n != goal) or "—"
-            print(f"{rank!s:>4}  {conditions:<44} {span:>30}  {others}")
+            print(f"{rank!s:>4}  {test:<{wide}}  {span:>24}  {others}")
     for note in result.notes:
         print(f"({note}; {result.candidates} candidate tests, {result.solver_calls} runs)")
     if result.figure:

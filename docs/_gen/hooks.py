@@ -15,8 +15,6 @@ key or field changes the page at the next build (tests/docs/test_docs.py builds 
 ``--json`` has no record in :data:`JSON_RECORDS` is a build warning, so an error under
 ``--strict``.
 
-Pages being written elsewhere (:data:`PENDING_PAGES`) get a one-line placeholder while
-their file is missing, so the navigation can name them and ``--strict`` still holds.
 """
 
 from __future__ import annotations
@@ -53,30 +51,10 @@ JSON_RECORDS = {
     "next-test": "surrogate.design._next_test:NextTestResult",
 }
 
-#: pages another engineer writes in parallel: a placeholder until the file exists
-PENDING_PAGES = {
-    "guides/measurements.md": "Measurements as labs export them",
-    "guides/clusters.md": "Many workers on a cluster (Slurm)",
-}
-
 _MARKER = re.compile(r"^<!-- (generated|include): ([\w./-]+) -->$", re.MULTILINE)
 
 
 # -- MkDocs events -----------------------------------------------------------------------------
-def on_files(files: Any, config: Any) -> Any:
-    from mkdocs.structure.files import File
-
-    for src_uri, title in PENDING_PAGES.items():
-        if files.get_file_from_path(src_uri) is None:
-            text = (
-                f"# {title}\n\nThis guide is being written and comes with the next release; "
-                "until then see the [tutorial](../tutorial/measurements.md) and the "
-                "[study-file reference](../reference/study-file.md).\n"
-            )
-            files.append(File.generated(config, src_uri, content=text))
-    return files
-
-
 def on_page_markdown(markdown: str, page: Any, config: Any, files: Any) -> str:
     return expand(markdown)
 
