@@ -271,6 +271,7 @@ def run_calibration(
     certify: bool = True,
     start: Mapping[str, float] | None = None,
     queue: Any = None,
+    intervals: bool = True,
 ) -> tuple[CalibrationResult, CalibrationLoop]:
     """:func:`calibrate`, and the loop it ran (the diagnosis reads its correction).
 
@@ -282,7 +283,8 @@ def run_calibration(
     solver (the diagnosis's calibrations, whose runs name the effect); ``start`` (a study
     with the built-in solver only): the local phase begins there, no global phase (the
     diagnosis's recalibration of the model in a better basin it found). ``queue`` solves
-    the expensive solver's runs (:func:`launched_runs`).
+    the expensive solver's runs (:func:`launched_runs`); without ``intervals`` no profile
+    intervals are computed (the linear ones stand, unchecked: a diagnosis's candidates).
     """
     check_jobs(jobs)
     check_budget(max_solver_calls)  # bad options fail before anything is read or written
@@ -318,6 +320,7 @@ def run_calibration(
         loop = CalibrationLoop(
             problem, runs, noise=noise, budget=LOW_FIDELITY_BUDGET, progress=progress, label=name
         )
+    loop.intervals = intervals  # the profile intervals (a diagnosis's candidates need none)
     smallest, made_of = loop.smallest_budget()
     if expensive and budget < smallest:
         if record:  # the user's calibration: refused before any run, not overshot

@@ -778,6 +778,7 @@ class _Refits:
             correction=CurveCorrection(self.correction.Z, self.correction.D),
             certify=False,
             queue=self.queue,
+            intervals=False,  # a confirmation ranks an effect: it states no intervals
         )
         self.expensive_calls += found.solver_calls
         if found.multi_fidelity is not None:
@@ -924,6 +925,7 @@ def _recalibrate(task: tuple[Any, ...]) -> tuple[_Refit | None, int]:
             correction=None if fix is None else CurveCorrection(*fix),
             expensive=fix is None,
             certify=False,
+            intervals=False,  # a candidate's recalibration ranks it: no intervals
         )
         refit = _refit((spec, data, effects, effect, found.params, noise, fix))
         return refit, found.solver_calls

@@ -271,6 +271,13 @@ class CorrectedCalibration(CalibrationLoop):
         (``verified``: per side, the solver and that ratio); the statement says which
         ends were verified and which not."""
         kind, problem = self.problem.spec.solver, self.problem
+        if not self.certify:  # a diagnosis's calibration spends its runs on naming the effect
+            return replace(
+                determination,
+                statement=f"{determination.statement}; the ends are the corrected model's, "
+                f"not verified with {kind} (a diagnosis's calibration)",
+                verification_solver_calls=0,
+            )
         best = self.best()
         assert best is not None
         rss_best = best.rmse**2 * problem.n_points
