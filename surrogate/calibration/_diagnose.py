@@ -221,15 +221,22 @@ def _diagnose(
     # an external solver's runs of one verification (minutes each) side by side; the
     # built-in solver's (milliseconds) stay in this process
     expensive_jobs = cpu_jobs(jobs) if spec.low_fidelity else 1
-    fitted, loop = run_calibration(
-        spec,
-        effects=chosen,
-        storage=url,
-        jobs=expensive_jobs,
-        progress=progress,
-        certify=False,
-        queue=queue,
-    )
+
+    def calibrated(start: Mapping[str, float] | None = None) -> tuple[Any, CalibrationLoop]:
+        """The current model's calibration (a ladder step), or its replacement from a better
+        basin's ``start`` (the built-in solver's loop only)."""
+        return run_calibration(
+            spec,
+            effects=chosen,
+            storage=url,
+            jobs=expensive_jobs,
+            progress=progress,
+            certify=False,
+            queue=queue,
+            start=start,
+        )
+
+    fitted, loop = calibrated()
     problem = CalibrationProblem(spec, data, chosen)
     say = _Say(progress, f"{spec.name}/diagnose")
     correction = _correction(loop, say)
@@ -250,14 +257,7 @@ def _diagnose(
         say(_rebased_text(rebased[-1], model_label(chosen), noise))
         if correction is None:
             spent = fitted.solver_calls
-            fitted, loop = run_calibration(
-                spec,
-                effects=chosen,
-                storage=url,
-                progress=progress,
-                certify=False,
-                start=beaten["params"],
-            )
+            fitted, loop = calibrated(beaten["params"])
     names, skipped = _candidates(problem, chosen, candidates, fitted.params)
     for effect, reason in skipped.items():
         say(f"{effect} skipped: {reason}")
@@ -298,14 +298,7 @@ def _diagnose(
         if not replace_it:
             break
         spent += fitted.solver_calls + refits.solver_calls + len(refits.used)
-        fitted, loop = run_calibration(
-            spec,
-            effects=chosen,
-            storage=url,
-            progress=progress,
-            certify=False,
-            start=better.params,
-        )
+        fitted, loop = calibrated(better.params)
     _record_heldout(url, name, current.heldout_rmse)
     result = _result(
         misfit,

@@ -209,14 +209,7 @@ class SolverRuns:
     ) -> dict[int, dict[str, Any]]:
         """Solver results of every item: from the cache, else solved (in ``jobs`` processes)
         and cached."""
-        results: dict[int, dict[str, Any]] = {}
-        todo = []
-        for i, key in enumerate(keys):
-            hit = self.cache.get(key)
-            if hit is None:
-                todo.append(i)
-            else:
-                results[i] = hit
+        results, todo = self.cache.hits(keys)
         started = time.monotonic()
         batch = [items[i][2] for i in todo]
         solved = (

@@ -231,14 +231,7 @@ class _Planner:
                     )
                 )
         keys = [input_hash(inputs) for inputs in items]
-        results: dict[int, dict[str, Any]] = {}
-        todo = []
-        for i, key in enumerate(keys):
-            hit = self.cache.get(key)
-            if hit is None:
-                todo.append(i)
-            else:
-                results[i] = hit
+        results, todo = self.cache.hits(keys)
         for j, result in imap_unordered(solve_inputs, [items[i] for i in todo], self.jobs):
             self.cache.put(keys[todo[j]], items[todo[j]], result)
             results[todo[j]] = result

@@ -59,3 +59,16 @@ class ResultCache:
 
     def __contains__(self, key: str) -> bool:
         return self.get(key) is not None
+
+    def hits(self, keys: list[str]) -> tuple[dict[int, dict[str, Any]], list[int]]:
+        """The stored results of ``keys`` by position, and the positions not stored (to
+        solve)."""
+        results: dict[int, dict[str, Any]] = {}
+        todo = []
+        for i, key in enumerate(keys):
+            hit = self.get(key)
+            if hit is None:
+                todo.append(i)
+            else:
+                results[i] = hit
+        return results, todo
