@@ -607,6 +607,7 @@ def _add_next_test(commands: _Subparsers) -> argparse.ArgumentParser:
 
 def _next_test(args: argparse.Namespace) -> int:
     from .design import next_test
+    from .study._design import conditions_text
 
     result = next_test(
         args.study,
@@ -628,13 +629,7 @@ def _next_test(args: argparse.Namespace) -> int:
         rows: list[tuple[Any, dict[str, Any]]] = list(enumerate(result.recommended, 1))
         if result.reference is not None:
             rows.append(("ref", result.reference))
-        tests = [
-            ", ".join(
-                f"{k} {v:.4g}" if not isinstance(v, str) else f"{k} {v}"
-                for k, v in entry["conditions"].items()
-            )
-            for _, entry in rows
-        ]
+        tests = [conditions_text(e["conditions"], tuple(e["conditions"])) for _, e in rows]
         wide = max(len(t) for t in tests)
         print(f"{'rank':>4}  {'test':<{wide}}  {goal + ' after (95 %)':>24}  also settles")
         for (rank, entry), test in zip(rows, tests, strict=True):

@@ -218,6 +218,39 @@ def test_the_report_shows_the_stored_diagnosis(calibrated):
 
 
 @pytest.mark.slow
+def test_the_report_shows_the_stored_next_test(calibrated, tmp_path):
+    """What `surrogate next-test` stores on the calibration study: its ranked tests in
+    the goal's words, the effects the data cannot test with the test that would, and
+    the section's place-holder before it ran."""
+    study, fitted = calibrated
+    page = tmp_path / "before.html"
+    assert "next_test" not in surrogate.report(study, output=page).shown
+    assert "No recommended test in this storage yet: run `surrogate next-test" in page.read_text()
+    copy = tmp_path / "study"
+    shutil.copytree(study.parent, copy)
+    designed = copy / study.name
+    designed.write_text(
+        designed.read_text() + "\n[design]\nbending_length_mm = { low = 5.0, high = 20.0 }\n"
+    )
+    found = surrogate.next_test(designed, plots=False, progress=False)
+    assert found.recommended and found.untestable
+    text = (copy / "cal-report.html").read_text() if surrogate.report(designed).shown else ""
+    assert html.escape(found.message) in text
+    best, goal = found.recommended[0], found.goal
+    conditions = ", ".join(f"{k} {v:g}" for k, v in best["conditions"].items())
+    cells = [
+        html.escape(conditions),
+        str(best["replicates"]),
+        html.escape(best["predicted"][goal]["precision"]),
+    ]
+    assert "<td>1</td><td>" + "</td><td>".join(cells) + "</td>" in text
+    for entry in found.untestable:
+        assert (
+            html.escape(f"Untestable with these data: {entry['effect']}: {entry['reason']}") in text
+        )
+
+
+@pytest.mark.slow
 def test_external_solver_curves_are_taken_from_the_cache_only(calibrated, tmp_path):
     """A reader must not start an hour-long run: ``solve=False`` uses the result cache."""
     study, fitted = calibrated

@@ -31,6 +31,7 @@ from ..identify._worker import HEARTBEAT_S
 from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import distributions, quiet_optuna
 from ..storage._storage import check_heartbeat, check_storage_url, open_storage
+from ..study._design import conditions_text
 from ..study._lab_files import sources_sha256
 from ..study._space import ParameterSpace
 from ..study._spec import StudySpec
@@ -381,7 +382,7 @@ def next_test_check(
     )
     predicted = best["predicted"][goal]["width_after"]
     ratio = realised / predicted if predicted > 0 else math.inf
-    conditions = ", ".join(f"{k} {v}" for k, v in best["conditions"].items())
+    conditions = conditions_text(best["conditions"], tuple(best["conditions"]))
     return {
         "conditions": best["conditions"],
         "goal": goal,

@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 from scipy.stats import qmc
 
-from ..study._design import DesignSpec
+from ..study._design import DesignSpec, conditions_text
 
-__all__ = ["LEVELS", "MOST", "candidate_tests"]
+__all__ = ["LEVELS", "MOST", "candidate_tests", "conditions_text"]
 
 LEVELS = 4  # values of each numeric range: its ends and two between
 MOST = 64  # candidate tests at most
@@ -38,21 +38,6 @@ def candidate_tests(
         chosen = sorted({int(p * len(grid)) for p in picks})[:MOST]
         grid = [grid[k] for k in chosen]
     return [{**dict(reference), **conditions} for conditions in grid]
-
-
-def conditions_text(conditions: Mapping[str, Any], varied: tuple[str, ...]) -> str:
-    """The conditions a candidate sets, as the table shows them ("bending_length_mm 5,
-    tension_n 60")."""
-    return (
-        ", ".join(
-            f"{name} {conditions[name]:g}"
-            if not isinstance(conditions[name], str)
-            else f"{name} {conditions[name]}"
-            for name in varied
-            if name in conditions
-        )
-        or "the reference test's conditions"
-    )
 
 
 def as_json(conditions: Mapping[str, Any]) -> dict[str, Any]:

@@ -59,7 +59,8 @@ class Calibration:
     """The calibrations of the study: the one shown (``model``, ``record``: its
     ``calibrate --json`` record, ``why``: why that model), the model ladder, and the
     stored diagnosis of that model (``diagnosis``: its ``diagnose --json`` record;
-    ``verdict``: its verdict, also from the dashboard note of an older diagnosis)."""
+    ``verdict``: its verdict, also from the dashboard note of an older diagnosis) and its
+    stored recommendation (``next_test``: the ``next-test --json`` record)."""
 
     model: str
     study: str
@@ -68,6 +69,7 @@ class Calibration:
     ladder: list[dict[str, Any]]
     diagnosis: dict[str, Any] | None
     verdict: str | None
+    next_test: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -131,7 +133,10 @@ def _missing(
             "This study has no measured curves ([measurements] file): nothing to calibrate, "
             "compare or diagnose."
         )
-        return {**missing, **dict.fromkeys(("calibration", "comparison", "diagnosis"), none)}
+        return {
+            **missing,
+            **dict.fromkeys(("calibration", "comparison", "diagnosis", "next_test"), none),
+        }
     if calibration is None:
         missing["calibration"] = (
             f"No calibration in this storage yet: run `surrogate calibrate {path}`."
@@ -139,6 +144,11 @@ def _missing(
         missing["comparison"] = "No calibrated model to compare with the measured curves yet."
     if calibration is None or (calibration.diagnosis is None and calibration.verdict is None):
         missing["diagnosis"] = f"No diagnosis in this storage yet: run `surrogate diagnose {path}`."
+    if calibration is None or calibration.next_test is None:
+        missing["next_test"] = (
+            f"No recommended test in this storage yet: run `surrogate next-test {path}` "
+            "(the study's [design] says what the lab can vary)."
+        )
     return missing
 
 
@@ -188,7 +198,8 @@ def _calibration(spec: StudySpec, storage: Any) -> Calibration | None:
     study = optuna.load_study(study_name=name, storage=storage)
     diagnosis = study.user_attrs.get("diagnosis")
     verdict = diagnosis["verdict"] if diagnosis else _note_part(study, "## Diagnosis:")
-    return Calibration(step["model"], name, record, why, ladder, diagnosis, verdict)
+    next_test = study.user_attrs.get("next_test")
+    return Calibration(step["model"], name, record, why, ladder, diagnosis, verdict, next_test)
 
 
 def _note_part(study: optuna.Study, heading: str) -> str | None:

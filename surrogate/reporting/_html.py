@@ -21,6 +21,7 @@ from ..calibration._diagnose import ladder_figure
 from ..calibration._statistics import ranking_label
 from ..storage._dashboard import verified_curves_figure
 from ..storage._storage import redacted_url
+from ..study._design import conditions_text
 from ._findings import Calibration, Findings, Identification
 from ._solvers import solver_facts
 
@@ -76,6 +77,7 @@ def render(findings: Findings, *, generated: str, version: str) -> str:
         _calibration(findings),
         _comparison(findings, figures),
         _diagnosis(findings, figures),
+        _next_test(findings),
         _export(findings),
     ]
     return (
@@ -425,6 +427,47 @@ def _verdict(found: Calibration) -> list[str]:
     follows = [f["covariate"] for f in diagnosis["follows"] if f.get("significant")]
     parts.append(_p("The residual follows: " + (", ".join(follows) or "nothing recorded")))
     return parts
+
+
+def _next_test(findings: Findings) -> str:
+    """The stored ``next-test`` recommendation of the shown model: the ranked tests, what
+    each settles of the goal, the effects the data cannot test and the pairs no test
+    tells apart."""
+    title = "Next test (surrogate next-test)"
+    found = findings.calibration
+    record = found.next_test if found is not None else None
+    if record is None:
+        return _section("next_test", title, _p(findings.missing["next_test"], "missing"))
+    goal = record["goal"]
+    parts = [_p(record["message"])]
+    rows = [(str(rank), entry) for rank, entry in enumerate(record["recommended"], 1)]
+    if record.get("reference") is not None:
+        rows.append(("reference", record["reference"]))
+    if rows and goal:
+        parts.append(
+            _table(
+                ["rank", "test", "replicates", f"{goal} after (95 %)", "also settles"],
+                [
+                    [
+                        rank,
+                        _e(conditions_text(entry["conditions"], tuple(entry["conditions"]))),
+                        str(entry["replicates"]),
+                        _e(entry["predicted"][goal]["precision"]),
+                        _e(", ".join(n for n in entry["settles"] if n != goal) or "—"),
+                    ]
+                    for rank, entry in rows
+                ],
+            )
+        )
+    for entry in record["untestable"]:  # with the test that would make it testable
+        test = entry["test"]
+        test = test if isinstance(test, str) else f"a test at {conditions_text(test, tuple(test))}"
+        parts.append(
+            _p(f"Untestable with these data: {entry['effect']}: {entry['reason']}; {test}.")
+        )
+    parts += [_p(entry["reason"]) for entry in record["inseparable"]]
+    parts += [_p(f"({note}; {record['candidates']} candidate tests)") for note in record["notes"]]
+    return _section("next_test", title, *parts)
 
 
 # -- the keyword snippet -------------------------------------------------------------------------

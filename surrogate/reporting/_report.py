@@ -30,7 +30,7 @@ from ._html import render
 
 __all__ = ["PARTS", "ReportResult", "report"]
 
-PARTS = ("identification", "calibration", "comparison", "diagnosis", "export")
+PARTS = ("identification", "calibration", "comparison", "diagnosis", "next_test", "export")
 """The parts of the report that come from the storage (the study and solver always show)."""
 
 _LOG = logging.getLogger(__name__)

@@ -12,6 +12,7 @@ section: a bad key or value is one line naming it and the fix.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,7 +20,7 @@ from .._errors import InputDataError
 from ._conditions import CONDITIONS, DIRECTIONS
 from ._keys import keys
 
-__all__ = ["DesignRange", "DesignSpec", "design_settings"]
+__all__ = ["DesignRange", "DesignSpec", "conditions_text", "design_settings"]
 
 DEFAULT_REPLICATES = 2
 
@@ -132,3 +133,18 @@ def _range(name: str, value: Any, where: str) -> DesignRange:
     if log and low <= 0:
         raise InputDataError(f"{where}: design.{name} is log-spaced, so low must be > 0")
     return DesignRange(name, float(low), float(high), bool(log))
+
+
+def conditions_text(conditions: Mapping[str, Any], varied: tuple[str, ...]) -> str:
+    """The conditions a candidate sets, as the table shows them ("bending_length_mm 5,
+    tension_n 60")."""
+    return (
+        ", ".join(
+            f"{name} {conditions[name]:g}"
+            if not isinstance(conditions[name], str)
+            else f"{name} {conditions[name]}"
+            for name in varied
+            if name in conditions
+        )
+        or "the reference test's conditions"
+    )
