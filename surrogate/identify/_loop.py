@@ -74,7 +74,8 @@ class RunResult:
 
     ``study`` and ``storage`` name the Optuna study ``<name>/verify`` and its storage
     URL; ``identifiability`` is what the target determines (``statement``, the exponents
-    of F60 in each parameter and the equally good points); ``iterations`` the search
+    of F60 in each parameter, the equally good points and whether they bear out the linear
+    figure: :class:`~._identifiability.Identifiability`); ``iterations`` the search
     iterations; ``message`` the sentence the command prints.
     """
 
@@ -446,14 +447,16 @@ def _result(
         }
     model = _final_model(spec, verifier, fidelity)
     if point is not None and model is not None:
-        good = _equally_good(model, spec, verifier, iterations)
+        good, verified_good = _equally_good(model, spec, verifier, iterations)
         if chosen is None and len(good) == 0:
             identifiability = {
                 "statement": "No verified or predicted point meets the target, "
                 "so the data determine nothing yet."
             }
         else:
-            identifiability = _assess(spec, point, model, good, chosen is not None, verifier)
+            identifiability = _assess(
+                spec, point, model, good, verified_good, chosen is not None, verifier
+            )
     multi = _multi_fidelity(spec, fidelity, model, point)
     message = _message(spec, status, verifier, point, calls_to_verify)
     if multi is not None:
@@ -505,6 +508,7 @@ def _assess(
     point: Verification,
     model: Any,
     good: np.ndarray,
+    verified_good: int,
     verified: bool,
     verifier: Verifier,
 ) -> dict[str, Any]:
@@ -513,7 +517,8 @@ def _assess(
     study, from the corrected built-in model."""
     names = verifier.names
     gradient, source = None, None
-    if verified and isinstance(model, CorrectedModel):
+    corrected = isinstance(model, CorrectedModel)
+    if verified and corrected:
         gradient, source = model.sensitivities(point), "the corrected built-in model at the result"
     elif verified:
         gradient = verifier.sensitivities(point)
@@ -527,6 +532,9 @@ def _assess(
         target_n=target_of(spec),
         solver_gradient=gradient,
         gradient_source=source,
+        verified_good=verified_good,
+        space=spec.space,
+        predicted_by="the corrected built-in model" if corrected else "the surrogate",
     )
     return assessment.to_json()
 
@@ -547,7 +555,11 @@ def _note(spec: StudySpec, result: RunResult) -> str:
     return "\n".join(lines)
 
 
-def _equally_good(model: Any, spec: StudySpec, verifier: Verifier, iterations: int) -> np.ndarray:
+def _equally_good(
+    model: Any, spec: StudySpec, verifier: Verifier, iterations: int
+) -> tuple[np.ndarray, int]:
+    """The feasible points that meet the target: predicted by the search's surrogate,
+    then the verified ones (their count)."""
     names = verifier.names
     trials = _search(model, spec, iterations + 1)
     predicted = trials[trials.feasible & (trials.misfit <= spec.targets.tolerance)]
@@ -555,7 +567,7 @@ def _equally_good(model: Any, spec: StudySpec, verifier: Verifier, iterations: i
     points = [predicted[names].to_numpy()]
     if verified:
         points.append(np.array(verified))
-    return np.vstack(points)
+    return np.vstack(points), len(verified)
 
 
 def _message(
