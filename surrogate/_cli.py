@@ -629,7 +629,7 @@ def _next_test(args: argparse.Namespace) -> int:
         rows: list[tuple[Any, dict[str, Any]]] = list(enumerate(result.recommended, 1))
         if result.reference is not None:
             rows.append(("ref", result.reference))
-        tests = [conditions_text(e["conditions"], tuple(e["conditions"])) for _, e in rows]
+        tests = [conditions_text(e["conditions"]) for _, e in rows]
         wide = max(len(t) for t in tests)
         print(f"{'rank':>4}  {'test':<{wide}}  {goal + ' after (95 %)':>24}  also settles")
         for (rank, entry), test in zip(rows, tests, strict=True):

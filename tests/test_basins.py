@@ -10,10 +10,13 @@ in the data; seeds 0, 1 and 3–7 reach the noise floor (0.98 × noise).
 
 import json
 
+import numpy as np
 import pytest
 
 import surrogate
 import surrogate.calibration._loop as loop_module
+from surrogate.calibration._basins import spread_rows
+from surrogate.calibration._loop import THIN_UNIT
 from surrogate.calibration._synthetic import (
     anisotropy_basin_set,
     calibration_sets,
@@ -118,3 +121,24 @@ def test_compare_says_when_another_basin_beats_the_calibration(tmp_path, monkeyp
     again = surrogate.calibrate(path, progress=False)
     assert surrogate.compare(path, plots=False, progress=False).calibration["beaten_by"] is None
     assert again.rmse_n <= NEAR_NOISE * again.noise_n
+
+
+def test_a_surrogate_refit_beyond_its_rows_keeps_verified_points_and_spreads_the_rest():
+    """``spread_rows``: a finite-difference cloud around a verified point thins to that
+    point (its rows at every condition group kept), points apart stay, and the rows of a
+    point near a kept one go."""
+    rng = np.random.default_rng(3)
+    optimum = rng.random(4)
+    cloud = optimum + rng.normal(0.0, 1e-3, (60, 4))  # a local phase's differences
+    spread = rng.random((40, 4))
+    points = np.vstack([spread[:20], cloud, optimum, spread[20:]])
+    units = np.repeat(points, 3, axis=0)  # three condition groups a point
+    keep = spread_rows(units, [optimum], THIN_UNIT)
+    kept = units[keep]
+    assert (np.all(kept == optimum, axis=1)).sum() == 3
+    assert not any(np.array_equal(u, c) for u in kept for c in cloud)
+    for point in np.unique(kept, axis=0):
+        assert (np.all(kept == point, axis=1)).sum() == 3  # every group of a kept point
+    distances = np.max(np.abs(kept[:, None, :] - kept[None, :, :]), axis=2)
+    assert np.all((distances == 0) | (distances > THIN_UNIT))
+    assert len(np.unique(kept, axis=0)) >= 35  # points apart are not dropped

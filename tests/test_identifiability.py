@@ -67,6 +67,7 @@ def test_a_combination_f60_fixes_exactly_is_said_to_hold(seed, target, tolerance
     assert found.set_spread <= LINEAR_HOLDS * found.relative_uncertainty
     assert "as the linear figure says" in found.statement
     assert "3 verified, " in found.statement
+    assert found.set_spread > 0  # the check ran over the other points
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -105,37 +106,43 @@ def test_a_combination_that_holds_near_the_result_only_is_said_to(seed, verified
     assert "as the linear figure says" not in found.statement
 
 
-def test_a_span_that_reaches_a_bound_says_the_target_leaves_that_side_open():
+def test_a_span_that_reaches_a_bound_says_so_and_by_which_points():
+    """F60 = f(Ecoat·Tcoat): Scoat anywhere, so the points reach both of its bounds; a
+    bound only predicted points reach is said to be predicted."""
     good = _meeting(_linear, 12.0, 0.02, 400, 0)
-    found = _assess(_linear, good, 1, 12.0, 0.02)
     unit = PAPER_SPACE.to_unit(good)
-    for k, name in enumerate(NAMES):
-        low_open, high_open = unit[:, k].min() <= 0.02, unit[:, k].max() >= 0.98
-        expected = {
-            (False, False): "two-sided",
-            (True, False): "upper-bound",
-            (False, True): "lower-bound",
-            (True, True): "free",
-        }[(low_open, high_open)]
-        assert found.kinds[name] == expected
-    assert found.kinds["scoat_gpa"] == "free"  # F60 = f(Ecoat·Tcoat): Scoat anywhere
-    span = r"Scoat [\d.]+ \(at its lower bound\)–[\d.]+ \(at its upper bound\)"
+    low, high = int(np.argmin(unit[:, 1])), int(np.argmax(unit[:, 1]))
+    rest = np.delete(good, [low, high], axis=0)
+    # the point at Scoat's upper end verified, the one at its lower end predicted
+    ordered = np.vstack([rest, good[[low]], good[[high]]])
+    found = _assess(_linear, ordered, 1, 12.0, 0.02)
+    assert unit[low, 1] < 0.02 and unit[high, 1] > 0.98
+    assert found.bounds_reached["scoat_gpa"] == {"low": "predicted", "high": "verified"}
+    span = (
+        r"Scoat [\d.]+ \(at its lower bound: predicted, not run\)–[\d.]+ "
+        r"\(at its upper bound\)"
+    )
     assert re.search(span, found.statement), found.statement
+    # a bound no point comes near is not said to be reached
+    inner = good[(unit[:, 0] > 0.1) & (unit[:, 0] < 0.9)]
+    found = _assess(_linear, inner, 1, 12.0, 0.02)
+    assert found.bounds_reached["ecoat_gpa"] == {"low": None, "high": None}
 
 
 def test_without_other_points_nothing_is_claimed_about_the_set():
     chosen = np.array([[1.2, 0.3, 0.01]])
-    found = _assess(_linear, chosen, 1, 12.0, 0.01)
-    assert found.linear_check in ("holds", "unchecked")
-    empty = assess_identifiability(
-        NAMES,
-        chosen[0],
-        _linear,
-        np.empty((0, 3)),
-        tolerance=0.01,
-        preference_order=[],
-        target_n=12.0,
-        space=PAPER_SPACE,
-    )
-    assert empty.linear_check == "unchecked"
-    assert "No other equally good point was found to check it against" in empty.statement
+    found = _assess(_linear, chosen, 1, 12.0, 0.01)  # the result alone
+    assert found.linear_check == "unchecked"
+    assert "No other equally good point was found to check it against" in found.statement
+    assert "as the linear figure says" not in found.statement
+    with pytest.raises(ValueError, match="verified_good = 2 must lie in 0–1"):
+        _assess(_linear, chosen, 2, 12.0, 0.01)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_points_the_surrogate_alone_bears_out_leave_the_check_open(seed):
+    """Within the linear figure, but no verified point besides the result: open."""
+    good = _meeting(_linear, 12.0, 0.01, 30, seed)
+    found = _assess(_linear, good, 1, 12.0, 0.01)
+    assert found.linear_check == "open", found.statement
+    assert "but only the surrogate's predicted points, not run, bear that out" in found.statement

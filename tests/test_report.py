@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import optuna
+import pandas as pd
 import pytest
 
 import surrogate
@@ -219,13 +220,13 @@ def test_the_report_shows_the_stored_diagnosis(calibrated):
 
 @pytest.mark.slow
 def test_the_report_shows_the_stored_next_test(calibrated, tmp_path):
-    """What `surrogate next-test` stores on the calibration study: its ranked tests in
-    the goal's words, the effects the data cannot test with the test that would, and
-    the section's place-holder before it ran."""
-    study, fitted = calibrated
-    page = tmp_path / "before.html"
-    assert "next_test" not in surrogate.report(study, output=page).shown
-    assert "No recommended test in this storage yet: run `surrogate next-test" in page.read_text()
+    """What `surrogate next-test` stores on the calibration study: its message (with the
+    effects the data cannot test) and its ranked tests in the goal's words; the
+    section's place-holder before it ran, and a warning once the data changed since."""
+    study, _ = calibrated
+    before = tmp_path / "before.html"
+    assert "next_test" not in surrogate.report(study, output=before).shown
+    assert "No recommended test in this storage yet: run `surrogate next-test" in before.read_text()
     copy = tmp_path / "study"
     shutil.copytree(study.parent, copy)
     designed = copy / study.name
@@ -234,20 +235,26 @@ def test_the_report_shows_the_stored_next_test(calibrated, tmp_path):
     )
     found = surrogate.next_test(designed, plots=False, progress=False)
     assert found.recommended and found.untestable
-    text = (copy / "cal-report.html").read_text() if surrogate.report(designed).shown else ""
+    page = tmp_path / "after.html"
+    assert "next_test" in surrogate.report(designed, output=page).shown
+    text = page.read_text()
     assert html.escape(found.message) in text
+    assert all(html.escape(entry["reason"]) in text for entry in found.untestable)
     best, goal = found.recommended[0], found.goal
     conditions = ", ".join(f"{k} {v:g}" for k, v in best["conditions"].items())
-    cells = [
-        html.escape(conditions),
-        str(best["replicates"]),
-        html.escape(best["predicted"][goal]["precision"]),
-    ]
+    precision = best["predicted"][goal]["precision"]
+    cells = [html.escape(conditions), str(best["replicates"]), html.escape(precision)]
     assert "<td>1</td><td>" + "</td><td>".join(cells) + "</td>" in text
-    for entry in found.untestable:
-        assert (
-            html.escape(f"Untestable with these data: {entry['effect']}: {entry['reason']}") in text
-        )
+    assert f"{found.candidates} candidate tests)" in text
+    assert "Made on other measurements" not in text
+    # the lab measures another test and calibrates again: the recommendation is stale
+    table = pd.read_csv(copy / "tests.csv")
+    extra = table[table["test_id"] == table["test_id"].iloc[0]].assign(test_id="again")
+    pd.concat([table, extra]).to_csv(copy / "tests.csv", index=False)
+    surrogate.calibrate(designed, progress=False)
+    stale = tmp_path / "stale.html"
+    surrogate.report(designed, output=stale)
+    assert "Made on other measurements than the calibration shown" in stale.read_text()
 
 
 @pytest.mark.slow

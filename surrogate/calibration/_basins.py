@@ -38,6 +38,7 @@ __all__ = [
     "effect_starts",
     "far_from",
     "optima_record",
+    "spread_rows",
 ]
 
 BASIN_SHARE = 0.5  # the share of the calibration's budget the search may spend, at most
@@ -120,8 +121,31 @@ def effect_starts(space: Any, theta: np.ndarray, offs: dict[str, float]) -> list
 
 def far_from(unit: np.ndarray, known: Sequence[np.ndarray], within: float = NEAR_UNIT) -> bool:
     """Whether a unit point lies farther than ``within`` (in some coordinate) from every
-    known one."""
-    return all(np.max(np.abs(unit - other)) > within for other in known)
+    known one (``known``: a sequence of points or an (m, p) array)."""
+    if len(known) == 0:
+        return True
+    others = np.asarray(known, dtype=float).reshape(len(known), -1)
+    return bool(np.all(np.max(np.abs(others - unit), axis=1) > within))
+
+
+def spread_rows(units: np.ndarray, first: Sequence[np.ndarray], within: float) -> np.ndarray:
+    """The rows of ``units`` (n, p) to keep, a bool mask (n,): those at a point of
+    ``first`` (kept whatever their spacing: the verified points and optima) and, in their
+    order, those farther than ``within`` (:func:`far_from`) from every kept point; a kept
+    point's rows at other condition groups (the same point) are kept with it."""
+    kept = np.empty((len(first) + len(units), units.shape[1]))
+    count = len(first)
+    kept[:count] = np.asarray(first, dtype=float).reshape(count, units.shape[1])
+    keys = {point.tobytes() for point in kept[:count]}
+    keep = np.zeros(len(units), dtype=bool)
+    for row, unit in enumerate(units):
+        known = unit.tobytes() in keys
+        if known or far_from(unit, kept[:count], within):
+            keep[row] = True
+            if not known:
+                kept[count], count = unit, count + 1
+                keys.add(unit.tobytes())
+    return keep
 
 
 def distinct_optima(fits: Sequence[LocalFit]) -> list[LocalFit]:

@@ -382,7 +382,7 @@ def next_test_check(
     )
     predicted = best["predicted"][goal]["width_after"]
     ratio = realised / predicted if predicted > 0 else math.inf
-    conditions = conditions_text(best["conditions"], tuple(best["conditions"]))
+    conditions = conditions_text(best["conditions"])
     return {
         "conditions": best["conditions"],
         "goal": goal,

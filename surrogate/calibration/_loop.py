@@ -51,6 +51,7 @@ from ._basins import (
     effect_starts,
     far_from,
     optima_record,
+    spread_rows,
 )
 from ._determination import Determination, checked, determine, linear_entries
 from ._local import (
@@ -881,11 +882,13 @@ class CalibrationLoop:
 
     def _fit(self, model: CurveSurrogate) -> None:
         """Refit the curve surrogate on the runs so far; beyond ``SURROGATE_ROWS`` of them,
-        on the points ``THIN_UNIT`` apart (each point's runs at every condition group)."""
+        on the verified points and optima and the other points ``THIN_UNIT`` from them and
+        from each other (each point's runs at every condition group; a trigger, not a cap)."""
         runs = self.runs
         X, groups, curves = np.array(runs.X), np.array(runs.groups), np.array(runs.curves)
         if len(X) > SURROGATE_ROWS:
-            keep = _spread_rows(self.problem.space.to_unit(X), THIN_UNIT)
+            space = self.problem.space
+            keep = spread_rows(space.to_unit(X), self._verified_units(), THIN_UNIT)
             X, groups, curves = X[keep], groups[keep], curves[keep]
         model.fit(X, groups, curves)
 
@@ -1026,18 +1029,3 @@ def _with_gradient(
         return float(values[0]), (values[1:] - values[0]) / steps
 
     return value_and_gradient
-
-
-def _spread_rows(units: np.ndarray, within: float) -> np.ndarray:
-    """The rows of ``units`` (n, p) whose point is a kept one or lies farther than
-    ``within`` (in some coordinate) from every kept point, kept in their order: a bool
-    mask (n,)."""
-    keep = np.zeros(len(units), dtype=bool)
-    kept = np.empty((0, units.shape[1]))
-    for row, unit in enumerate(units):
-        distance = np.max(np.abs(kept - unit), axis=1)
-        if np.any(distance == 0.0) or np.all(distance > within):
-            keep[row] = True
-            if not np.any(distance == 0.0):
-                kept = np.vstack([kept, unit])
-    return keep

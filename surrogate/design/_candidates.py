@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 from scipy.stats import qmc
 
-from ..study._design import DesignSpec, conditions_text
+from ..study._design import DesignSpec
 
-__all__ = ["LEVELS", "MOST", "candidate_tests", "conditions_text"]
+__all__ = ["LEVELS", "MOST", "candidate_tests"]
 
 LEVELS = 4  # values of each numeric range: its ends and two between
 MOST = 64  # candidate tests at most

@@ -49,7 +49,8 @@ from ..solvers._cache import ResultCache, input_hash
 from ..solvers._fidelity import LOW_FIDELITY
 from ..storage._optuna import quiet_optuna
 from ..storage._storage import check_storage_url, open_storage, refuse_in_memory
-from ._candidates import as_json, candidate_tests, conditions_text
+from ..study._design import conditions_text
+from ._candidates import as_json, candidate_tests
 from ._information import added_chi2, moved_side, separated
 
 __all__ = ["NextTestResult", "next_test"]
@@ -633,9 +634,7 @@ class _Planner:
             )
         for item in untestable:
             test = item["test"]
-            how = (
-                test if isinstance(test, str) else f"a test at {conditions_text(test, tuple(test))}"
-            )
+            how = test if isinstance(test, str) else f"a test at {conditions_text(test)}"
             text += f"; `{item['effect']}` cannot be tested: {item['reason']} — {how}"
         for item in inseparable:
             text += "; " + item["reason"]
@@ -769,7 +768,7 @@ def _record(
     if result.recommended:
         lines += ["| test | replicates | settles |", "|---|---|---|"]
         for entry in result.recommended:
-            text = conditions_text(entry["conditions"], tuple(entry["conditions"]))
+            text = conditions_text(entry["conditions"])
             lines.append(
                 f"| {text} | {entry['replicates']} | {', '.join(entry['settles']) or '—'} |"
             )

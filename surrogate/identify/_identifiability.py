@@ -10,11 +10,11 @@ points (verified or predicted within tolerance, feasible) checks it: where the
 combination scatters over the set by more than ``LINEAR_HOLDS`` times the linear
 ``±tolerance / max|a|``, F60 depends on other things elsewhere in the ranges (a coat
 whose curve saturates before 60° is set by its plastic moment, not by D), and the
-statement says the linear figure holds near the result only. Each parameter's span
-over the set says which sides the target leaves open: a side the set reaches within
-``OPEN_UNIT`` of the declared bound is not bounded by the target (``kinds``: the
-calibration's words, two-sided, lower-bound, upper-bound, free). The set is what the
-search found, so a span is at least that wide; the predicted points are the
+statement says the linear figure holds near the result only. Only points besides the
+result check it, and only verified ones make the check a finding. Each parameter's span
+over the set says which declared bounds it reaches (within ``BOUND_UNIT``), and whether
+a verified point or only a predicted one does. The set is what the search found, so a
+span is at least that wide — never a confidence interval; the predicted points are the
 surrogate's, not run. The preferences pick one point from it.
 """
 
@@ -22,15 +22,18 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ..study._space import ParameterSpace
 
 __all__ = ["Identifiability", "assess_identifiability"]
 
 _SHOWN_EXPONENT = 0.05
 LINEAR_HOLDS = 1.5  # the set's scatter of the combination within this × the linear ±: it holds
-OPEN_UNIT = 0.02  # a span this near a bound (share of its range, log where declared) reaches it
+BOUND_UNIT = 0.02  # a span this near a bound (share of its range, log where declared) reaches it
 _LABELS = {"ecoat_gpa": "Ecoat", "scoat_gpa": "Scoat", "tcoat_mm": "Tcoat"}
 
 
@@ -39,10 +42,13 @@ class Identifiability:
     """The identifiability statement of a result (fields are its JSON keys).
 
     ``relative_uncertainty`` is the linear ± of the combination; ``set_spread`` its
-    scatter over the ``n_equally_good`` points (``n_verified_good`` of them run), and
-    ``linear_check`` what that says of the linear figure (``holds``, ``fails``, ``open``,
-    ``unchecked``); ``ranges`` each parameter's span over the points and ``kinds`` which
-    sides the target bounds (``two-sided``, ``lower-bound``, ``upper-bound``, ``free``).
+    scatter over the ``n_equally_good`` points (``n_verified_good`` of them run, the
+    result among them), and ``linear_check`` what that says of the linear figure:
+    ``holds`` (verified points besides the result take part), ``fails`` (the verified
+    points alone scatter it more), ``open`` (the verdict rests on predicted points only)
+    or ``unchecked`` (no point besides the result). ``ranges`` is each parameter's span
+    over the points and ``bounds_reached`` which declared bound it reaches, by side
+    (``low``, ``high``): ``verified``, ``predicted`` (only predicted points do) or None.
     """
 
     exponents: dict[str, float]
@@ -55,7 +61,7 @@ class Identifiability:
     ranges: dict[str, list[float]]
     linear_check: str
     n_verified_good: int
-    kinds: dict[str, str]
+    bounds_reached: dict[str, dict[str, str | None]]
     chosen_by: list[str]
     statement: str
 
@@ -75,7 +81,7 @@ def assess_identifiability(
     solver_gradient: np.ndarray | None = None,
     gradient_source: str | None = None,
     verified_good: int = 0,
-    space: Any = None,
+    space: ParameterSpace | None = None,
     predicted_by: str = "the surrogate",
 ) -> Identifiability:
     """Assess what a scalar F60 target determines around ``chosen``.
@@ -99,8 +105,7 @@ def assess_identifiability(
     verified_good : int
         How many of ``equally_good`` (its last rows) the full solver ran.
     space : ParameterSpace, optional
-        The declared ranges (each span's open sides); without it, every side counts as
-        bounded.
+        The declared ranges (the bounds a span reaches); without it, none is said to.
     predicted_by : str
         What predicted the points that were not run (``log_f60``'s model).
     """
@@ -109,18 +114,24 @@ def assess_identifiability(
     shown = [k for k in np.argsort(-np.abs(exponents)) if abs(exponents[k]) >= _SHOWN_EXPONENT]
     combination = " · ".join(f"{_LABELS.get(names[k], names[k])}^{exponents[k]:.2f}" for k in shown)
     value = float(np.exp(exponents @ log_chosen))
-    spread, ranges = _equally_good_set(names, chosen, equally_good, exponents)
+    good = np.atleast_2d(np.asarray(equally_good, dtype=float)).reshape(-1, len(names))
+    if not 0 <= verified_good <= len(good):
+        raise ValueError(f"verified_good = {verified_good} must lie in 0–{len(good)}")
+    verified = np.arange(len(good)) >= len(good) - verified_good  # the last rows
+    spread, ranges = _equally_good_set(names, chosen, good, exponents)
     # F60 within ±tolerance fixes the combination to ±tolerance / max|a| where F60 is
     # log-linear in it; the equally good set checks that over the ranges
     uncertainty = tolerance / scale
-    verified_rows = np.atleast_2d(equally_good)[len(equally_good) - verified_good :]
-    verified_spread = _equally_good_set(names, chosen, verified_rows, exponents)[0]
-    check = _linear_check(len(equally_good), spread, verified_spread, uncertainty)
-    counted = (
-        f"{len(equally_good)} equally good points ({verified_good} verified, "
-        f"{len(equally_good) - verified_good} predicted by {predicted_by})"
+    verified_spread = _equally_good_set(names, chosen, good[verified], exponents)[0]
+    others = ~np.all(good == np.asarray(chosen, dtype=float), axis=1)
+    check = _linear_check(
+        int(others.sum()), int((others & verified).sum()), spread, verified_spread, uncertainty
     )
-    kinds = _kinds(names, equally_good, space)
+    counted = (
+        f"{_points(len(good))} ({int(verified.sum())} verified, "
+        f"{int((~verified).sum())} predicted by {predicted_by})"
+    )
+    reached = _bounds_reached(names, good, verified, space)
     source = (
         (gradient_source or "full-solver runs at the result")
         if solver_gradient is not None
@@ -131,7 +142,7 @@ def assess_identifiability(
         f"result, {combination}{_meaning(names, exponents)}, to ±{100 * uncertainty:.1f} % "
         f"(linear: exponents from {source}). "
         f"{_checked(check, counted, spread, verified_spread, uncertainty, predicted_by)} "
-        f"The other directions are free: {_span(len(equally_good), ranges, kinds)}. "
+        f"The other directions are free: {_span(len(good), ranges, reached)}. "
         f"The preferences ({_preferences(preference_order)}) ranked the candidates; the "
         "result is the most preferred verified point that meets the target."
     )
@@ -152,7 +163,7 @@ def assess_identifiability(
         ranges=ranges,
         linear_check=check,
         n_verified_good=int(verified_good),
-        kinds=kinds,
+        bounds_reached=reached,
         chosen_by=list(preference_order),
         statement=statement,
     )
@@ -221,29 +232,46 @@ def _meaning(names: Sequence[str], exponents: np.ndarray) -> str:
     return ""
 
 
-def _kinds(names: Sequence[str], equally_good: np.ndarray, space: Any) -> dict[str, str]:
-    """What the target bounds of each parameter, from the set's span: a side the set
-    reaches within ``OPEN_UNIT`` of the declared bound is open."""
-    from ..calibration._determination import interval_kind_of  # identify loads first
+def _points(n: int) -> str:
+    return f"{n} equally good point{'' if n == 1 else 's'}"
 
-    if not len(equally_good) or space is None:
-        return dict.fromkeys(names, "two-sided")
-    unit = space.to_unit(np.atleast_2d(equally_good))
+
+def _bounds_reached(
+    names: Sequence[str], good: np.ndarray, verified: np.ndarray, space: ParameterSpace | None
+) -> dict[str, dict[str, str | None]]:
+    """Which declared bound each parameter's span reaches (within ``BOUND_UNIT``), by
+    side: ``verified`` (a verified point does), ``predicted`` (only predicted ones) or
+    None."""
+    if not len(good) or space is None:
+        return {n: {"low": None, "high": None} for n in names}
+    unit = space.to_unit(good)
+    sides = {"low": unit <= BOUND_UNIT, "high": unit >= 1.0 - BOUND_UNIT}
     return {
-        n: interval_kind_of(unit[:, k].min() > OPEN_UNIT, unit[:, k].max() < 1.0 - OPEN_UNIT)
+        n: {
+            side: "verified"
+            if np.any(near[:, k] & verified)
+            else "predicted"
+            if np.any(near[:, k])
+            else None
+            for side, near in sides.items()
+        }
         for k, n in enumerate(names)
     }
 
 
-def _linear_check(n_good: int, spread: float, verified_spread: float, uncertainty: float) -> str:
-    """``holds`` (the set scatters the combination within ``LINEAR_HOLDS`` × the linear
-    ±), ``fails`` (the verified points alone scatter more), ``open`` (only the surrogate's
-    predicted points do: they are not run) or ``unchecked`` (no other point)."""
-    if n_good == 0:
+def _linear_check(
+    others: int, verified_others: int, spread: float, verified_spread: float, uncertainty: float
+) -> str:
+    """``holds``, ``fails``, ``open`` or ``unchecked`` (:class:`Identifiability`): the
+    scatter of the combination over the points (``spread``; over the verified ones,
+    ``verified_spread``) against ``LINEAR_HOLDS`` × the linear ± (``uncertainty``), with
+    ``others`` points besides the result (``verified_others`` of them verified)."""
+    limit = LINEAR_HOLDS * uncertainty
+    if others == 0:
         return "unchecked"
-    if spread <= LINEAR_HOLDS * uncertainty:
-        return "holds"
-    return "fails" if verified_spread > LINEAR_HOLDS * uncertainty else "open"
+    if verified_spread > limit:
+        return "fails"
+    return "holds" if spread <= limit and verified_others > 0 else "open"
 
 
 def _checked(
@@ -257,26 +285,33 @@ def _checked(
         return f"Over the {counted} it scatters ±{100 * spread:.1f} %, as the linear figure says."
     if check == "fails":
         return (
-            f"The verified points alone scatter it ±{100 * verified_spread:.0f} %: the linear "
+            f"The verified points alone scatter it ±{100 * verified_spread:.1f} %: the linear "
             f"{linear} holds near the result only (across the ranges F60 depends on more than "
             "this combination)."
         )
+    if spread <= LINEAR_HOLDS * uncertainty:
+        return (
+            f"Over the {counted} it scatters ±{100 * spread:.1f} %, as the linear figure says, "
+            f"but only {by}'s predicted points, not run, bear that out (a full-solver run at "
+            "the farthest would tell)."
+        )
     return (
-        f"Over the {counted} it scatters ±{100 * spread:.0f} %, the predicted ones beyond the "
+        f"Over the {counted} it scatters ±{100 * spread:.1f} %, the predicted ones beyond the "
         f"linear {linear}; they are {by}'s, not run, so whether {linear} holds across the "
         "ranges is open (a full-solver run at the farthest would tell)."
     )
 
 
-def _span(n_good: int, ranges: dict[str, list[float]], kinds: dict[str, str]) -> str:
+def _span(n_good: int, ranges: dict[str, list[float]], reached: dict[str, dict]) -> str:
     if n_good == 0:
         return "no other equally good point was found"
+    said = {"verified": "at its {} bound", "predicted": "at its {} bound: predicted, not run"}
     words = []
     for n, (lo, hi) in ranges.items():
-        kind = kinds.get(n, "two-sided")
-        low = f"{lo:.3g}" + (" (at its lower bound)" if kind in ("upper-bound", "free") else "")
-        high = f"{hi:.3g}" + (" (at its upper bound)" if kind in ("lower-bound", "free") else "")
-        words.append(f"{_LABELS.get(n, n)} {low}–{high}")
+        low, high = (reached.get(n) or {}).get("low"), (reached.get(n) or {}).get("high")
+        low_text = f"{lo:.3g}" + (f" ({said[low].format('lower')})" if low else "")
+        high_text = f"{hi:.3g}" + (f" ({said[high].format('upper')})" if high else "")
+        words.append(f"{_LABELS.get(n, n)} {low_text}–{high_text}")
     return f"the equally good points span {', '.join(words)}"
 
 

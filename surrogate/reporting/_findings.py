@@ -60,7 +60,8 @@ class Calibration:
     ``calibrate --json`` record, ``why``: why that model), the model ladder, and the
     stored diagnosis of that model (``diagnosis``: its ``diagnose --json`` record;
     ``verdict``: its verdict, also from the dashboard note of an older diagnosis) and its
-    stored recommendation (``next_test``: the ``next-test --json`` record)."""
+    stored recommendation (``next_test``: the ``next-test --json`` record, with the hash of
+    the data it was made on; ``data_sha256``: the data the calibration saw last)."""
 
     model: str
     study: str
@@ -70,6 +71,7 @@ class Calibration:
     diagnosis: dict[str, Any] | None
     verdict: str | None
     next_test: dict[str, Any] | None = None
+    data_sha256: str | None = None
 
 
 @dataclass(frozen=True)
@@ -198,8 +200,18 @@ def _calibration(spec: StudySpec, storage: Any) -> Calibration | None:
     study = optuna.load_study(study_name=name, storage=storage)
     diagnosis = study.user_attrs.get("diagnosis")
     verdict = diagnosis["verdict"] if diagnosis else _note_part(study, "## Diagnosis:")
-    next_test = study.user_attrs.get("next_test")
-    return Calibration(step["model"], name, record, why, ladder, diagnosis, verdict, next_test)
+    attrs = study.user_attrs
+    return Calibration(
+        step["model"],
+        name,
+        record,
+        why,
+        ladder,
+        diagnosis,
+        verdict,
+        attrs.get("next_test"),
+        attrs.get("data_sha256"),
+    )
 
 
 def _note_part(study: optuna.Study, heading: str) -> str | None:

@@ -430,16 +430,25 @@ def _verdict(found: Calibration) -> list[str]:
 
 
 def _next_test(findings: Findings) -> str:
-    """The stored ``next-test`` recommendation of the shown model: the ranked tests, what
-    each settles of the goal, the effects the data cannot test and the pairs no test
-    tells apart."""
+    """The stored ``next-test`` recommendation of the shown model: its message (which
+    names the effects the data cannot test and the pairs no test tells apart) and the
+    ranked tests with what each settles of the goal; said to be stale where the data
+    changed since."""
     title = "Next test (surrogate next-test)"
     found = findings.calibration
     record = found.next_test if found is not None else None
-    if record is None:
+    if found is None or record is None:
         return _section("next_test", title, _p(findings.missing["next_test"], "missing"))
-    goal = record["goal"]
     parts = [_p(record["message"])]
+    if record.get("data_sha256") != found.data_sha256:
+        parts.append(
+            _p(
+                "Made on other measurements than the calibration shown (tests were added or "
+                f"changed since): run `surrogate next-test {findings.spec.path}` again.",
+                "missing",
+            )
+        )
+    goal = record["goal"]
     rows = [(str(rank), entry) for rank, entry in enumerate(record["recommended"], 1)]
     if record.get("reference") is not None:
         rows.append(("reference", record["reference"]))
@@ -450,7 +459,7 @@ def _next_test(findings: Findings) -> str:
                 [
                     [
                         rank,
-                        _e(conditions_text(entry["conditions"], tuple(entry["conditions"]))),
+                        _e(conditions_text(entry["conditions"])),
                         str(entry["replicates"]),
                         _e(entry["predicted"][goal]["precision"]),
                         _e(", ".join(n for n in entry["settles"] if n != goal) or "—"),
@@ -459,14 +468,8 @@ def _next_test(findings: Findings) -> str:
                 ],
             )
         )
-    for entry in record["untestable"]:  # with the test that would make it testable
-        test = entry["test"]
-        test = test if isinstance(test, str) else f"a test at {conditions_text(test, tuple(test))}"
-        parts.append(
-            _p(f"Untestable with these data: {entry['effect']}: {entry['reason']}; {test}.")
-        )
-    parts += [_p(entry["reason"]) for entry in record["inseparable"]]
-    parts += [_p(f"({note}; {record['candidates']} candidate tests)") for note in record["notes"]]
+    notes = "; ".join(record["notes"])
+    parts.append(_p(f"({notes + '; ' if notes else ''}{record['candidates']} candidate tests)"))
     return _section("next_test", title, *parts)
 
 

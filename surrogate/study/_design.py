@@ -135,9 +135,10 @@ def _range(name: str, value: Any, where: str) -> DesignRange:
     return DesignRange(name, float(low), float(high), bool(log))
 
 
-def conditions_text(conditions: Mapping[str, Any], varied: tuple[str, ...]) -> str:
-    """The conditions a candidate sets, as the table shows them ("bending_length_mm 5,
-    tension_n 60")."""
+def conditions_text(conditions: Mapping[str, Any], varied: tuple[str, ...] | None = None) -> str:
+    """The conditions a test sets, as tables and messages show them ("bending_length_mm 5,
+    tension_n 60"): those of ``varied`` (default: all of them)."""
+    varied = tuple(conditions) if varied is None else varied
     return (
         ", ".join(
             f"{name} {conditions[name]:g}"
