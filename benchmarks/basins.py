@@ -31,10 +31,11 @@ for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")
 
 ROOT = Path(__file__).resolve().parents[1]
-if not os.environ.get("PYTHONPATH"):
-    sys.path[:] = [str(ROOT)] + [
-        p for p in sys.path if Path(p or ".").resolve() != ROOT / "benchmarks"
-    ]
+# this folder's surrogate.py is a benchmark, not the package: off the path; the package is
+# this checkout's, or the one PYTHONPATH names (another checkout's code, side by side)
+sys.path[:] = ([] if os.environ.get("PYTHONPATH") else [str(ROOT)]) + [
+    p for p in sys.path if Path(p or ".").resolve() != ROOT / "benchmarks"
+]
 
 import surrogate  # noqa: E402
 from surrogate.calibration._synthetic import hidden_effect_tests, synthetic_measurements  # noqa: E402

@@ -20,8 +20,10 @@ from surrogate.calibration._loop import THIN_UNIT
 from surrogate.calibration._synthetic import (
     anisotropy_basin_set,
     calibration_sets,
+    synthetic_measurements,
     write_calibration_study,
 )
+from tests.studies import write_study
 
 CASE = anisotropy_basin_set()
 NEAR_NOISE = 1.3  # the diagnosis's "explained" (surrogate.calibration._statistics)
@@ -142,3 +144,43 @@ def test_a_surrogate_refit_beyond_its_rows_keeps_verified_points_and_spreads_the
     distances = np.max(np.abs(kept[:, None, :] - kept[None, :, :]), axis=2)
     assert np.all((distances == 0) | (distances > THIN_UNIT))
     assert len(np.unique(kept, axis=0)) >= 35  # points apart are not dropped
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_calibration_held_at_every_bound_reports_instead_of_failing(tmp_path, seed):
+    """Truth beyond every declared range (a thick stiff coat searched among thin soft
+    ones): the fit ends with each parameter at a bound and a systematic misfit; the basin
+    search has no direction left to move along and must say what it found, not fail (it
+    raised IndexError in ``along_least_determined``)."""
+    tests = [{"test_id": f"t{k}", "tension_n": 0.0} for k in range(2)]
+    table = synthetic_measurements(
+        tests,
+        coating={"ecoat_gpa": 3.5, "scoat_gpa": 0.35, "tcoat_mm": 0.05},
+        noise_n=0.05,
+        seed=seed,
+    )
+    path = write_study(
+        tmp_path,
+        table,
+        f"""
+        [study]
+        name = "bounds"
+        seed = {seed}
+        [parameters]
+        ecoat_gpa = {{ low = 0.5, high = 1.0, log = true }}
+        scoat_gpa = {{ low = 0.05, high = 0.1, log = true }}
+        tcoat_mm = {{ low = 0.01, high = 0.02, log = true }}
+        [measurements]
+        file = "tests.csv"
+        [budget]
+        calibration_solver_calls = 40
+        surrogate_trials = 100
+        """,
+    )
+    result = surrogate.calibrate(path, progress=False)
+    assert result.misfit == "systematic", result.message
+    assert all(
+        result.params[name] == pytest.approx(high, rel=1e-6)
+        for name, high in (("ecoat_gpa", 1.0), ("scoat_gpa", 0.1), ("tcoat_mm", 0.02))
+    ), result.params
+    assert "widen" in result.message  # what would tell whether a fit beyond is better

@@ -282,7 +282,10 @@ def along_least_determined(
 ) -> list[np.ndarray]:
     """Points ``step`` of a range either way (``signs``) from a fit along the direction
     its curves determine least (the last of ``determination.directions``), within the
-    bounds and outside the first-order test's box."""
+    bounds and outside the first-order test's box; none where every parameter is held at
+    a bound (no direction is left to move along)."""
+    if not determination.directions:
+        return []
     weights = determination.directions[-1]["weights"]  # in the declared scale z
     move = np.array([weights.get(p.name, 0.0) / p.span for p in problem.space])
     move *= step / np.max(np.abs(move))
