@@ -59,7 +59,7 @@ from surrogate.study._spec import load_study  # noqa: E402
 
 DESIGN = """
 [design]
-bending_length_mm = { low = 5.0, high = 20.0 }
+bending_length_mm = { low = 5.0, high = 17.5 }
 tension_n = { low = 0.0, high = 60.0 }
 replicates = 2
 """

@@ -231,7 +231,7 @@ def test_the_report_shows_the_stored_next_test(calibrated, tmp_path):
     shutil.copytree(study.parent, copy)
     designed = copy / study.name
     designed.write_text(
-        designed.read_text() + "\n[design]\nbending_length_mm = { low = 5.0, high = 20.0 }\n"
+        designed.read_text() + "\n[design]\nbending_length_mm = { low = 5.0, high = 17.5 }\n"
     )
     found = surrogate.next_test(designed, plots=False, progress=False)
     assert found.recommended and found.untestable

@@ -49,6 +49,7 @@ from ..solvers._cache import ResultCache, input_hash
 from ..solvers._fidelity import LOW_FIDELITY
 from ..storage._optuna import quiet_optuna
 from ..storage._storage import check_storage_url, open_storage, refuse_in_memory
+from ..study._conditions import RIG_CONDITIONS, rig_for
 from ..study._design import conditions_text
 from ._candidates import as_json, candidate_tests
 from ._information import added_chi2, moved_side, separated
@@ -140,7 +141,7 @@ def next_test(
     if spec.design.empty:
         raise InputDataError(
             f"study {spec.name!r} has no [design] section; add what your lab can vary for "
-            "the next test, e.g. [design] bending_length_mm = { low = 5.0, high = 20.0 }"
+            "the next test, e.g. [design] bending_length_mm = { low = 5.0, high = 17.5 }"
         )
     url = storage or spec.default_storage()
     check_storage_url(url)
@@ -181,6 +182,23 @@ def _check_calibration(stored: Mapping[str, Any] | None, name: str) -> None:
         )
 
 
+def _check_rig(design: Any, reference: Mapping[str, Any], rig: Any, where: Any) -> None:
+    """Every end of a ``[design]`` range of a rig condition is a test the rig can run (a
+    bending length the strip's free length holds on the probe up to 90°): else one line
+    naming the end and the fix, before any run."""
+    for span in design.ranges:
+        if span.name not in RIG_CONDITIONS:
+            continue
+        for end, value in (("low", span.low), ("high", span.high)):
+            try:
+                rig_for(rig, {**reference, span.name: value})
+            except InputDataError as error:
+                raise InputDataError(
+                    f"{where}: design.{span.name} {end} = {value:g} is a test the rig cannot "
+                    f"run ({error}); or narrow design.{span.name}"
+                ) from None
+
+
 class _Planner:
     """The candidates' runs and predictions for one calibrated model."""
 
@@ -204,6 +222,7 @@ class _Planner:
         # the threshold in units of σ²: t² · s²/σ² (3.84 where the misfit is the noise)
         self.threshold = t * t * (determination["sigma_n"] / noise) ** 2
         self.reference = problem.data.conditions_of(problem.test_ids[0])
+        _check_rig(self.design, self.reference, spec.rig, spec.path)
 
     # -- runs ----------------------------------------------------------------------------------
     def curves(

@@ -2,7 +2,7 @@
 
 Each key but ``replicates`` is a per-test condition (:data:`~._conditions.CONDITIONS`:
 ``tension_n``, ``bending_length_mm``, ``rate_deg_s``, …) with its range —
-``{ low = 5.0, high = 20.0 }``, optionally ``log = true`` — or, for ``direction``, the
+``{ low = 5.0, high = 17.5 }``, optionally ``log = true`` — or, for ``direction``, the
 list of directions the lab can cut (``["warp", "weft"]``). ``replicates`` is how many
 specimens a test gets (default 2). A condition the section leaves out is held at the
 reference test's value (the first test of the measurements). Validated like every
@@ -107,7 +107,7 @@ def _directions(value: Any, where: str) -> tuple[str, ...]:
 def _range(name: str, value: Any, where: str) -> DesignRange:
     """``{ low, high, log }`` of a numeric condition: finite, low ≤ high, log > 0; a
     tension may be 0, every other condition is positive."""
-    example = f"{name} = {{ low = 5.0, high = 20.0 }}"
+    example = f"{name} = {{ low = 5.0, high = 17.5 }}"
     if (
         not isinstance(value, dict)
         or set(value) - {"low", "high", "log"}

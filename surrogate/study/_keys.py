@@ -155,7 +155,8 @@ KEYS: tuple[StudyKey, ...] = (
     _K("design", "tension_n", "table { low, high, log }", None,
        "The end tension [N] the lab can set for the next test, e.g. `{ low = 0, high = 60 }`."),
     _K("design", "bending_length_mm", "table { low, high, log }", None,
-       "The bending length [mm] the lab can set, e.g. `{ low = 5, high = 20 }`."),
+       "The bending length [mm] the lab can set, e.g. `{ low = 5, high = 17.5 }` (each end "
+       "a test the rig can run: 2 × the length ≤ `[rig] free_length_mm`)."),
     _K("design", "rate_deg_s", "table { low, high, log }", None,
        "The rotation rate [°/s] the lab can set, e.g. `{ low = 9, high = 900, log = true }`."),
     _K("design", "direction", "list of strings", None,

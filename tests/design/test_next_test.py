@@ -25,7 +25,7 @@ from surrogate.calibration._synthetic import (
 TRUTH = {"ecoat_gpa": 0.7, "scoat_gpa": 0.3, "tcoat_mm": 0.015}
 DESIGN = """
 [design]
-bending_length_mm = { low = 5.0, high = 20.0 }
+bending_length_mm = { low = 5.0, high = 17.5 }
 tension_n = { low = 0.0, high = 60.0 }
 replicates = 2
 """
@@ -78,6 +78,29 @@ def test_next_test_needs_a_design_and_a_calibration(tmp_path):
     done = _cli("next-test", fresh)
     assert done.returncode == 2 and "run `surrogate calibrate` first" in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1
+
+
+def test_a_design_end_the_rig_cannot_run_is_one_line_and_nothing_written(calibrated, tmp_path):
+    """A bending length whose strip the free length does not hold on the probe up to 90°
+    (its candidates' runs failed, and were ranked last, before): refused before any run."""
+    path, _ = calibrated
+    copy = tmp_path / path.name
+    copy.write_text(
+        path.read_text().replace(
+            "bending_length_mm = { low = 5.0, high = 17.5 }",
+            "bending_length_mm = { low = 5.0, high = 20.0 }",
+        )
+    )
+    for name in ("tests.csv",):
+        (tmp_path / name).write_bytes((path.parent / name).read_bytes())
+    storage = f"sqlite:///{path.parent / 'np.db'}"
+    done = _cli("next-test", copy, "--storage", storage)
+    assert done.returncode == 2, done.stderr
+    line = done.stderr.strip()
+    assert len(line.splitlines()) == 1, line
+    assert "design.bending_length_mm high = 20 is a test the rig cannot run" in line
+    assert "free_length_mm must be ≥ 2 × bending_length_mm = 40 mm" in line
+    assert not (tmp_path / ".solver-cache").exists()
 
 
 def test_the_recommended_test_settles_more_than_replicates_of_the_reference(calibrated):
