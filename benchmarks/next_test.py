@@ -98,12 +98,14 @@ def _with_test(
     tests = [{"test_id": f"{tag}-{k}", **conditions} for k in (1, 2)]
     added = synthetic_measurements(tests, coating=truth, noise_n=NOISE_N, seed=seed)
     table = pd.read_csv(folder / "tests.csv")
+    rig = load_study(path).rig  # the measured tests' conditions where no column says
+    unstated = {"bending_length_mm": rig.bending_length_mm, "tension_n": rig.tension_n}
     for column in added.columns:
         if column not in table:
-            table[column] = conditions.get(column, 10.0 if column == "bending_length_mm" else 0.0)
+            table[column] = unstated.get(column, 0.0)
     for column in table.columns:
         if column not in added:
-            added[column] = 10.0 if column == "bending_length_mm" else 0.0
+            added[column] = conditions.get(column, unstated.get(column, 0.0))
     pd.concat([table, added], ignore_index=True).to_csv(folder / "tests.csv", index=False)
     return path
 
@@ -148,7 +150,7 @@ def run_case(task: tuple[int, int]) -> dict[str, Any]:
             **{
                 f"random-{k}": {
                     **advice.reference["conditions"],
-                    "bending_length_mm": round(float(rng.uniform(5.0, 20.0)), 3),
+                    "bending_length_mm": round(float(rng.uniform(5.0, 17.5)), 3),
                     "tension_n": round(float(rng.uniform(0.0, 60.0)), 3),
                 }
                 for k in range(random_tests)
