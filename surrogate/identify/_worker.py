@@ -507,9 +507,20 @@ class _Worker:
 
     def loop(self, idle_timeout_s: float) -> dict[str, Any]:
         """Work until nothing has been queued or running for ``idle_timeout_s`` (with
-        ``max_runs``: until that many runs, or nothing queued for ``idle_timeout_s``)."""
+        ``max_runs``: until that many runs, or nothing queued for ``idle_timeout_s``).
+
+        SIGTERM and SIGINT stop it between runs, or give the running one back. A signal
+        the process inherited as ignored stays ignored, as Python leaves it everywhere
+        else: a shell script's background job ignores SIGINT, so a Ctrl-C meant for the
+        script's foreground does not stop it. Before, the loop caught it while the rest
+        of the command ignored it, so a ``surrogate run`` started that way stopped at
+        some Ctrl-Cs and ran on through others."""
         main_thread = threading.current_thread() is threading.main_thread()
-        previous = {sig: signal.signal(sig, self._on_signal) for sig in _SIGNALS if main_thread}
+        previous = {
+            sig: signal.signal(sig, self._on_signal)
+            for sig in _SIGNALS
+            if main_thread and signal.getsignal(sig) is not signal.SIG_IGN
+        }
         try:
             with storage_errors(self.url):
                 idle_since = time.monotonic()
