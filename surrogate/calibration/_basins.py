@@ -119,7 +119,9 @@ def effect_starts(space: Any, theta: np.ndarray, offs: dict[str, float]) -> list
     return starts
 
 
-def far_from(unit: np.ndarray, known: Sequence[np.ndarray], within: float = NEAR_UNIT) -> bool:
+def far_from(
+    unit: np.ndarray, known: Sequence[np.ndarray] | np.ndarray, within: float = NEAR_UNIT
+) -> bool:
     """Whether a unit point lies farther than ``within`` (in some coordinate) from every
     known one (``known``: a sequence of points or an (m, p) array)."""
     if len(known) == 0:

@@ -26,12 +26,17 @@ Notations
 
 One side
 --------
-Its first step is the linear interval's end (the range's end where the linear interval
-has none). The constrained minimum at ``q = v`` (:meth:`Profiler._refit`): the last
+Its first step is the linear interval's end (a small share of the range where the linear
+interval has none or is blind, twice the farthest known point under the threshold where
+that lies beyond). The constrained minimum at ``q = v`` (:meth:`Profiler._refit`): the last
 point moved onto ``q = v`` along ``g = ∂q/∂x`` (algebra, no runs), then Gauss–Newton
 steps within the constraint's tangent plane (``g·d = 0``), each moved back onto it; the
 Jacobian is the optimum's, updated by Broyden's rule at each point (no differences: a run
-a condition group an evaluation, ``NUISANCE_EVALUATIONS`` at most). Where ``ρ`` lies
+a condition group an evaluation, ``NUISANCE_EVALUATIONS`` at most). A re-fit over the
+threshold is judged so only once it has settled: after a Gauss–Newton step from its linear
+prediction, until a step no longer halves its ``ρ`` or ``OVER_EVALUATIONS`` are spent (its
+``ρ`` bounds the profile's from above; the prediction alone can be far off along the
+valley of equally good coats). Where ``ρ`` lies
 within ``AGREES`` the end is found — at the first step, the linear interval stands
 (``method`` ``linear``); else the next ``η`` by the secant rule on ``√ΔRSS`` (between
 bracketing steps, by interpolation), at most ``MAX_STEPS``. A side whose step at the end
@@ -73,7 +78,8 @@ AGREES = (0.8, 1.25)  # ΔRSS/Δ at a side's end: found (the end within ~±10 % 
 LINEAR_HOLDS = (0.95, 1.25)  # …and the linear end stands as it is (else moved out, ρ < 1)
 NUISANCE_EVALUATIONS = 3  # residual evaluations of one constrained re-fit
 FIRST_EVALUATIONS = 2  # …of a side's first (the linear end's check)
-FAR_OVER = 25.0  # a re-fit this far over the threshold (ρ) after a step: no more steps
+FAR_OVER = 25.0  # a re-fit this far over the threshold (ρ) after a step that no longer
+# halved it: no more steps
 PIN_UNIT = 1e-4  # a parameter this near a bound (share of its range) is held by it
 FLAT = 0.1  # ρ under this up to where a range holds the step over: the ranges end the side
 OPEN_PRECISION = 0.1  # …found to within this share of the quantity's range
@@ -470,7 +476,8 @@ class Profiler:
         after a Gauss–Newton step from the linear prediction (``OVER_AFTER_STEPS``), and
         only once a step no longer halves its ``ρ`` (up to ``OVER_EVALUATIONS``): its ``ρ``
         bounds the profile's from above, so an end or a confirmation it makes must come
-        from a re-fit that has settled. The evaluated point of lowest RSS, and the
+        from a re-fit that has settled, or spent ``OVER_EVALUATIONS``. An overshot step's
+        half is evaluated within that limit too. The evaluated point of lowest RSS, and the
         Jacobian."""
         model = self.model
         last_x, last_r = start, model.residual(start)
@@ -487,6 +494,8 @@ class Profiler:
                 last_x, last_r = x, r
             rss = float(r @ r)
             if rss >= best_rss:  # the step overshot: half of it, from the best point
+                if evaluation == allowed and allowed < OVER_EVALUATIONS:
+                    allowed += 1  # the half is evaluated: an overshoot is no judgement
                 x = self._onto(quantity, 0.5 * (best + x), target, jac)
                 continue
             best, best_rss = x, rss

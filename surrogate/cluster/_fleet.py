@@ -126,7 +126,8 @@ class Fleet:
 
     # -- the context: SIGTERM, and cancel on the way out ------------------------------------
     def __enter__(self) -> Fleet:
-        if threading.current_thread() is threading.main_thread():
+        main = threading.current_thread() is threading.main_thread()
+        if main and signal.getsignal(signal.SIGTERM) is not signal.SIG_IGN:  # ignored: stays
             self._previous = signal.signal(signal.SIGTERM, self._on_sigterm)
         return self
 

@@ -393,7 +393,8 @@ def _work_in_processes(
             if process.pid is not None and process.is_alive():
                 process.terminate()
 
-    previous = signal.signal(signal.SIGTERM, forward)
+    ignored = signal.getsignal(signal.SIGTERM) is signal.SIG_IGN  # as the children do
+    previous = None if ignored else signal.signal(signal.SIGTERM, forward)
     try:
         for process in processes:
             while process.is_alive():
@@ -403,7 +404,8 @@ def _work_in_processes(
         for process in processes:
             process.join()
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        if not ignored:
+            signal.signal(signal.SIGTERM, previous)
     counts: dict[str, Any] = {"runs": 0, "ok": 0, "failed": 0, "solved": 0, "interrupted": None}
     errors = []
     while not results.empty():
@@ -510,7 +512,7 @@ class _Worker:
         ``max_runs``: until that many runs, or nothing queued for ``idle_timeout_s``).
 
         SIGTERM and SIGINT stop it between runs, or give the running one back. A signal
-        the process inherited as ignored stays ignored, as Python leaves it everywhere
+        ignored when the loop starts (inherited so) stays ignored, as Python leaves it everywhere
         else: a shell script's background job ignores SIGINT, so a Ctrl-C meant for the
         script's foreground does not stop it. Before, the loop caught it while the rest
         of the command ignored it, so a ``surrogate run`` started that way stopped at
