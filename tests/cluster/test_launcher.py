@@ -267,6 +267,17 @@ def test_a_job_that_died_holding_a_run_is_replaced_once_its_run_is_queued(tmp_pa
     assert f"stand-in job {job} ended NODE_FAIL" in caplog.text
 
 
+def test_a_sigterm_whose_exception_was_lost_stops_the_next_look(tmp_path):
+    """The SIGTERM handler's Interrupted raised where something swallows it (a storage
+    retry around a PostgreSQL query): the fleet's next look raises it again."""
+    fleet = _fleet(tmp_path, _Launcher())
+    fleet.tend(_demand(0))
+    with pytest.raises(Interrupted, match="stopped"):
+        fleet._on_sigterm(signal.SIGTERM, None)
+    with pytest.raises(Interrupted, match="stopped"):
+        fleet.tend(_demand(1))
+
+
 def test_a_worker_that_refused_to_start_stops_the_study_with_its_line(tmp_path):
     launcher = _Launcher()
     fleet = _fleet(tmp_path, launcher)
