@@ -17,6 +17,7 @@ from __future__ import annotations
 import functools
 import multiprocessing
 import os
+import signal
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -26,6 +27,7 @@ from ._errors import InputDataError
 
 __all__ = [
     "can_fork",
+    "catch_signal",
     "check_jobs",
     "cpu_jobs",
     "imap_unordered",
@@ -47,6 +49,18 @@ def can_fork() -> bool:
 def process_context() -> Any:
     """The multiprocessing context of every child process the package starts."""
     return multiprocessing.get_context("fork" if can_fork() else "spawn")
+
+
+def catch_signal(signum: int, handler: Callable[[int, Any], Any]) -> Any:
+    """``handler`` for ``signum`` in this process, unless the process ignores it; the
+    handler it replaced, None where it installed none. An ignored signal stays ignored,
+    as Python leaves it: a shell script's background job starts with SIGINT ignored, so a
+    Ctrl-C meant for the script's foreground does not stop it. Catching it in one part of
+    a command only (the worker loop had) made ``surrogate run`` stop at some Ctrl-Cs and
+    run on through others."""
+    if signal.getsignal(signum) is signal.SIG_IGN:
+        return None
+    return signal.signal(signum, handler)
 
 
 def one_blas_thread() -> None:

@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from .._errors import InputDataError, Interrupted
+from .._pool import catch_signal
 from ._launcher import ENDED, PENDING, RUNNING, JobRequest, JobState, Launcher
 
 __all__ = ["FAILURES_IN_A_ROW", "Demand", "Fleet", "jobs_to_submit"]
@@ -127,9 +128,8 @@ class Fleet:
 
     # -- the context: SIGTERM, and cancel on the way out ------------------------------------
     def __enter__(self) -> Fleet:
-        main = threading.current_thread() is threading.main_thread()
-        if main and signal.getsignal(signal.SIGTERM) is not signal.SIG_IGN:  # ignored: stays
-            self._previous = signal.signal(signal.SIGTERM, self._on_sigterm)
+        if threading.current_thread() is threading.main_thread():
+            self._previous = catch_signal(signal.SIGTERM, self._on_sigterm)
         return self
 
     def __exit__(self, kind: type[BaseException] | None, *exc: object) -> None:

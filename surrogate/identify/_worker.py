@@ -40,7 +40,13 @@ from optuna.trial import TrialState
 
 from .._errors import InputDataError, Interrupted, SolverError, SurrogateError
 from .._log import show_progress
-from .._pool import check_jobs, one_blas_thread, one_blas_thread_within, process_context
+from .._pool import (
+    catch_signal,
+    check_jobs,
+    one_blas_thread,
+    one_blas_thread_within,
+    process_context,
+)
 from ..cluster import Demand, Fleet
 from ..cluster._launcher import JOB_ID_VARIABLE
 from ..solvers._batch import solve_inputs
@@ -393,8 +399,7 @@ def _work_in_processes(
             if process.pid is not None and process.is_alive():
                 process.terminate()
 
-    ignored = signal.getsignal(signal.SIGTERM) is signal.SIG_IGN  # as the children do
-    previous = None if ignored else signal.signal(signal.SIGTERM, forward)
+    previous = catch_signal(signal.SIGTERM, forward)  # ignored: as the children do
     try:
         for process in processes:
             while process.is_alive():
@@ -404,7 +409,7 @@ def _work_in_processes(
         for process in processes:
             process.join()
     finally:
-        if not ignored:
+        if previous is not None:
             signal.signal(signal.SIGTERM, previous)
     counts: dict[str, Any] = {"runs": 0, "ok": 0, "failed": 0, "solved": 0, "interrupted": None}
     errors = []
@@ -511,18 +516,11 @@ class _Worker:
         """Work until nothing has been queued or running for ``idle_timeout_s`` (with
         ``max_runs``: until that many runs, or nothing queued for ``idle_timeout_s``).
 
-        SIGTERM and SIGINT stop it between runs, or give the running one back. A signal
-        ignored when the loop starts (inherited so) stays ignored, as Python leaves it everywhere
-        else: a shell script's background job ignores SIGINT, so a Ctrl-C meant for the
-        script's foreground does not stop it. Before, the loop caught it while the rest
-        of the command ignored it, so a ``surrogate run`` started that way stopped at
-        some Ctrl-Cs and ran on through others."""
+        SIGTERM and SIGINT stop it between runs, or give the running one back; one the
+        process ignores stays ignored (:func:`~surrogate._pool.catch_signal`)."""
         main_thread = threading.current_thread() is threading.main_thread()
-        previous = {
-            sig: signal.signal(sig, self._on_signal)
-            for sig in _SIGNALS
-            if main_thread and signal.getsignal(sig) is not signal.SIG_IGN
-        }
+        caught = {sig: catch_signal(sig, self._on_signal) for sig in _SIGNALS if main_thread}
+        previous = {sig: handler for sig, handler in caught.items() if handler is not None}
         try:
             with storage_errors(self.url):
                 idle_since = time.monotonic()
