@@ -244,13 +244,17 @@ class ResidualModel:
         one of them past a bound from inside, :meth:`FitCoordinates.crosses_a_bound`, unless
         the inward step would leave the box: at such a corner the forward step stays); a
         column whose shifted run failed is zero."""
+        return self.columns(x, range(x.size))
+
+    def columns(self, x: np.ndarray, which: Sequence[int]) -> np.ndarray:
+        """The columns ``which`` of :meth:`jacobian` at ``x`` (an evaluation each)."""
         residual = self.residual(x)
-        jac = np.empty((residual.size, x.size))
-        for j in range(x.size):
+        out = np.empty((residual.size, len(which)))
+        for k, j in enumerate(which):
             shifted, step = self._shifted(x, j)
             shifted_residual, curves = self.evaluate(shifted)
-            jac[:, j] = 0.0 if curves is None else (shifted_residual - residual) / step
-        return jac
+            out[:, k] = 0.0 if curves is None else (shifted_residual - residual) / step
+        return out
 
     def _shifted(self, x: np.ndarray, j: int) -> tuple[np.ndarray, float]:
         """The point of :meth:`jacobian`'s ``j``-th difference, and its step."""
