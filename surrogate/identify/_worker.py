@@ -73,6 +73,12 @@ logger = logging.getLogger(__name__)
 
 Solve = Callable[[dict[str, Any]], dict[str, Any]]
 POLL_S = 0.5
+#: How long a worker whose solve failed waits for a stop signal before it records the
+#: failure [s]. A batch scheduler's cancel signals the job's processes at once: the solver's
+#: program (``srun`` and its tasks) may die of it, and its failure be returned, before the
+#: worker's own SIGTERM handler has run; that failure is the cancel's, not the run's, so the
+#: run is given back (seen: a run recorded failed and never solved, tests/cluster/test_slurm.py)
+STOP_GRACE_S = 0.5
 HEARTBEAT_S = 10
 JOB_ATTR = "job"  # a trial's system attribute: the scheduler's job whose worker claimed it
 
@@ -654,9 +660,19 @@ class _Worker:
             result = {"status": "failed", "reason": f"{type(error).__name__}: {error}"}
         finally:
             self._solving = False
+        if result.get("status") != "ok" and self._stopped_within(STOP_GRACE_S):
+            raise _Interrupted(self._stop)  # killed by the stop: given back, not cached
         self.counts["solved"] += 1
         self.cache.put(key, inputs, result)
         return result
+
+    def _stopped_within(self, seconds: float) -> bool:
+        """Whether a stop signal has come, or comes within ``seconds`` (its handler runs
+        in this, the main, thread between the sleeps)."""
+        deadline = time.monotonic() + seconds
+        while self._stop is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return self._stop is not None
 
     def _requeue(self, trial: optuna.Trial) -> None:
         """FAIL the interrupted trial after queueing its copy (as a stale trial's)."""

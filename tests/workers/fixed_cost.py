@@ -6,13 +6,15 @@ to a log, so a test counts how often every run was started and finished.
 
 Run as a worker: ``python -m tests.workers.fixed_cost STUDY STORAGE LOG COST_S
 [JOBS] [HEARTBEAT_S] [--idle-timeout S] [--storage-patience S]
-[--pause-at-first-heartbeat MARKER]``.
+[--pause-at-first-heartbeat MARKER] [--cancelled]``.
 """
 
 from __future__ import annotations
 
 import os
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -33,6 +35,7 @@ class FixedCostSolve:
         *,
         fail_above_tcoat_mm: float = np.inf,
         deaths: tuple[str | Path, int] | None = None,
+        cancelled: bool = False,
     ):
         """``deaths = (folder, n)``: the first ``n`` solves (of any process) each write a
         file ``death-K`` into ``folder`` and die there (``os._exit``), as a worker the
@@ -41,6 +44,7 @@ class FixedCostSolve:
         self.cost_s = cost_s
         self.fail_above_tcoat_mm = fail_above_tcoat_mm
         self.deaths = None if deaths is None else (str(deaths[0]), deaths[1])
+        self.cancelled = cancelled
 
     def _write(self, event: str, key: str) -> None:
         with open(self.log, "a", encoding="utf-8") as handle:
@@ -58,6 +62,9 @@ class FixedCostSolve:
                     continue
                 os._exit(9)
         time.sleep(self.cost_s)
+        if self.cancelled:  # as a job cancelled: its program dies first, the worker's signal after
+            threading.Timer(0.1, os.kill, (os.getpid(), signal.SIGTERM)).start()
+            raise RuntimeError("the solver's program was terminated")
         params = inputs["params"]
         if params["tcoat_mm"] > self.fail_above_tcoat_mm:
             raise RuntimeError(f"stand-in solver refuses Tcoat {params['tcoat_mm']:.3g} mm")
@@ -126,6 +133,7 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--idle-timeout", type=float, default=0.0)
     parser.add_argument("--storage-patience", type=float, default=STORAGE_PATIENCE_S)
     parser.add_argument("--pause-at-first-heartbeat", metavar="MARKER")
+    parser.add_argument("--cancelled", action="store_true", help="each solve as a job cancelled")
     args = parser.parse_args(argv)
     if args.pause_at_first_heartbeat:
         pause_at_first_heartbeat(args.pause_at_first_heartbeat)
@@ -136,7 +144,7 @@ def main(argv: list[str]) -> int:
         heartbeat_s=args.heartbeat_s,
         idle_timeout_s=args.idle_timeout,
         storage_patience_s=args.storage_patience,
-        solve=FixedCostSolve(args.log, args.cost_s),
+        solve=FixedCostSolve(args.log, args.cost_s, cancelled=args.cancelled),
         progress=False,
     )
     return 143 if result.interrupted == "SIGTERM" else 0

@@ -274,6 +274,31 @@ def test_sigterm_fails_the_trial_and_another_worker_redoes_it(study_file, storag
     assert dones == dict.fromkeys(keys, 1)
 
 
+def test_a_solve_that_fails_of_the_workers_stop_gives_its_run_back(
+    study_file, storage_url, tmp_path
+):
+    """A job cancelled by the scheduler: its solver's program dies of the SIGTERM and fails
+    before the worker's own SIGTERM comes (here 0.1 s later). That failure is the cancel's:
+    the run is given back (queued again, nothing recorded or cached as its result), and
+    another worker solves it (the code before recorded the run failed, and a planner
+    restarted then never solved it)."""
+    [key] = _plan(study_file, storage_url, 1)
+    log = tmp_path / "solver.log"
+    cancelled = _worker(study_file, storage_url, log, 0.0, options=("--cancelled",))
+    _, stderr = cancelled.communicate(timeout=60)
+    assert cancelled.returncode == 143, stderr
+    trials = _trials(study_file, storage_url)
+    assert not [t for t in trials if "reason" in t.user_attrs]  # no failure recorded
+    assert [t.system_attrs.get("interrupted") for t in trials if t.state == TrialState.FAIL] == [
+        "SIGTERM"
+    ]
+    assert [t.user_attrs["input_hash"] for t in trials if t.state == TrialState.WAITING] == [key]
+    _wait_all([_worker(study_file, storage_url, log, 0.0)])
+    complete = [t for t in _trials(study_file, storage_url) if t.state == TrialState.COMPLETE]
+    assert [t.user_attrs["input_hash"] for t in complete] == [key]  # solved, not a cached failure
+    assert [k for e, k, _ in events(log) if e == "done"] == [key]
+
+
 def test_a_planner_stopped_by_sigterm_while_its_workers_solve_stops_and_resumes(
     study_file, tmp_path
 ):
