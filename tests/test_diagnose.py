@@ -92,3 +92,47 @@ def test_bad_diagnose_options_are_one_line_errors(tmp_path, capsys, option):
         main(["diagnose", str(path), *option])
     assert exit_info.value.code == 2
     assert "\n" not in capsys.readouterr().err.strip()
+
+
+def test_a_diagnosis_after_the_same_calibration_takes_it_and_says_the_same(tmp_path):
+    """`surrogate calibrate`, then `surrogate diagnose` on the same study, data and code:
+    the diagnosis takes the recorded calibration instead of running it again, and says
+    what a diagnosis that ran it says (the same verdict, figures and run counts)."""
+    hidden = {"tension": {"k_e": 0.006, "k_s": 0.006}}
+    candidates = ["tension", "anisotropy"]
+    ran = surrogate.diagnose(
+        _study(tmp_path / "ran", hidden), candidates=candidates, progress=False
+    )
+    path = _study(tmp_path / "taken", hidden)
+    calibration = surrogate.calibrate(path, progress=False)
+    taken = surrogate.diagnose(path, candidates=candidates, progress=False)
+    assert ran.reused_calibration is None
+    assert taken.reused_calibration == calibration.study
+    assert taken.rmse_n == ran.rmse_n
+    assert taken.verdict == ran.verdict and taken.solver_calls == ran.solver_calls
+    figures = [(c["effect"], c["rmse_n"], c["delta_bic"]) for c in ran.ranking]
+    assert [(c["effect"], c["rmse_n"], c["delta_bic"]) for c in taken.ranking] == figures
+
+
+def test_a_recorded_calibration_is_taken_only_for_the_same_inputs(tmp_path):
+    """The key of a calibration's inputs changes with the model, the budget, the tests and
+    the measurements' bytes; there is none for plug-in effects or an external solver."""
+    from dataclasses import replace
+
+    from surrogate.calibration._calibrate import calibration_key
+    from surrogate.calibration._problem import load_calibration
+
+    path = _study(tmp_path, None)
+
+    def key(effects=(), plugins=(), budget=200, tests=None, solver="builtin"):
+        spec = load_calibration(path, effects, ())[0]
+        return calibration_key(replace(spec, solver=solver), effects, plugins, budget, tests)
+
+    first = key()
+    assert first is not None and key() == first  # loaded again: the same
+    changed = [key(("tension",)), key(budget=100), key(tests=["a1", "b", "c"])]
+    assert first not in changed and len(set(changed)) == 3
+    assert key(plugins=("my_effects",)) is None and key(solver="calculix") is None
+    data = tmp_path / "tests.csv"
+    data.write_text(data.read_text(encoding="utf-8") + "\n", encoding="utf-8")
+    assert key() != first

@@ -59,9 +59,11 @@ __all__ = [
     "beaten_by",
     "beaten_text",
     "calibrate",
+    "calibration_key",
     "calibration_note",
     "data_hash",
     "launched_runs",
+    "recorded_calibration",
     "run_calibration",
 ]
 
@@ -346,7 +348,10 @@ def run_calibration(
             result = replace(
                 result, next_test=checked, message=f"{result.message}; {checked['sentence']}"
             )
-        _record(result.storage, name, problem, loop.verified, result, data_hash(spec))
+        key = None
+        if start is None and correction is None:
+            key = calibration_key(spec, chosen, plugins, budget, tests)
+        _record(result.storage, name, problem, loop.verified, result, data_hash(spec), key)
     return result, loop
 
 
@@ -638,6 +643,51 @@ def data_hash(spec: StudySpec) -> str:
     return sources_sha256(spec.measurements_file, spec.measurement_format)
 
 
+def calibration_key(
+    spec: StudySpec,
+    effects: Sequence[str],
+    plugins: Sequence[str],
+    budget: int,
+    tests: Sequence[Any] | None,
+) -> str | None:
+    """SHA-256 of everything a built-in study's calibration follows from: the study as
+    loaded, the model's effects, the budget, the tests calibrated on, the measurements'
+    bytes, the package's source and the numerical libraries' versions (the calibration is
+    deterministic given these: tests/test_calibrate_sweep.py). None where that cannot be
+    said here: an external solver's calibration (the diagnosis needs its loop's
+    correction, not only its result) and plug-in effects (their code is not hashed)."""
+    if spec.low_fidelity or plugins or spec.measurements_file is None:
+        return None
+    import scipy
+    import sklearn
+
+    digest = hashlib.sha256()
+    for part in (repr(spec), repr(list(effects)), str(budget), repr(tests), data_hash(spec)):
+        digest.update(part.encode() + b"\0")
+    for library in (np, scipy, sklearn, optuna):
+        digest.update(f"{library.__name__} {library.__version__}\0".encode())
+    package = Path(__file__).resolve().parents[1]
+    for source in sorted(package.rglob("*.py")):
+        digest.update(f"{source.relative_to(package)}\0".encode() + source.read_bytes())
+    return digest.hexdigest()
+
+
+def recorded_calibration(url: str, name: str, key: str | None) -> CalibrationResult | None:
+    """The result the calibration study ``name`` recorded where its :func:`calibration_key`
+    is ``key`` (the same calibration, run before: ``surrogate calibrate`` then
+    ``surrogate diagnose``); else None (never recorded, another key, or ``key`` None)."""
+    if key is None:
+        return None
+    try:
+        study = optuna.load_study(study_name=name, storage=open_storage(url))
+    except KeyError:
+        return None
+    attrs = study.user_attrs
+    if attrs.get("calibration_key") != key or "result" not in attrs:
+        return None
+    return CalibrationResult(**attrs["result"])
+
+
 # -- the record in the Optuna storage -----------------------------------------------------------
 def _record(
     url: str,
@@ -646,8 +696,10 @@ def _record(
     verified: list[VerifiedPoint],
     result: CalibrationResult,
     data_sha: str,
+    inputs_key: str | None,
 ) -> None:
-    """Verifications as trials of the study ``name``; the result as a study attribute."""
+    """Verifications as trials of the study ``name``; the result as a study attribute,
+    with the :func:`calibration_key` of its inputs (None: not one to reuse)."""
     quiet_optuna()
     study = optuna.create_study(study_name=name, storage=open_storage(url), load_if_exists=True)
     known = {
@@ -679,6 +731,7 @@ def _record(
         study.add_trial(trial)
     study.set_user_attr("result", json.loads(json.dumps(result.to_json())))
     study.set_user_attr("data_sha256", data_sha)
+    study.set_user_attr("calibration_key", inputs_key)
     _note(study, calibration_note(result.to_json()))
 
 

@@ -61,9 +61,11 @@ from ..storage._storage import check_storage_url, open_storage, refuse_in_memory
 from ._calibrate import (
     CalibrationResult,
     beaten_by,
+    calibration_key,
     calibration_note,
     declared_bound_sides,
     launched_runs,
+    recorded_calibration,
     run_calibration,
     unconverged_reason,
 )
@@ -137,6 +139,10 @@ class DiagnosisResult:
     ``replaced`` (True: the model was recalibrated from there, its ladder step replaced,
     and the candidates ranked again; False: not, and no effect is named — with an external
     solver the recalibration is left to ``surrogate calibrate``, which the verdict says).
+
+    ``reused_calibration``: the calibration study whose recorded result stood for the
+    current model's calibration (the same study, data and code, built-in solver: not run
+    again; its runs still count in ``solver_calls``), None where it was run.
     """
 
     rmse_n: float
@@ -155,6 +161,7 @@ class DiagnosisResult:
     ladder: list[dict[str, Any]]
     multi_fidelity: dict[str, Any] | None = None
     rebased: list[dict[str, Any]] = field(default_factory=list)
+    reused_calibration: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -222,9 +229,26 @@ def _diagnose(
     # built-in solver's (milliseconds) stay in this process
     expensive_jobs = cpu_jobs(jobs) if spec.low_fidelity else 1
 
-    def calibrated(start: Mapping[str, float] | None = None) -> tuple[Any, CalibrationLoop]:
+    name = calibration_study_name(spec, chosen)
+    key = calibration_key(spec, chosen, plugins, spec.budget.calibration_solver_calls, None)
+    reused: list[str] = []  # the study whose recorded calibration stands, if one does
+
+    def calibrated(
+        start: Mapping[str, float] | None = None,
+    ) -> tuple[Any, CalibrationLoop | None]:
         """The current model's calibration (a ladder step), or its replacement from a better
-        basin's ``start`` (the built-in solver's loop only)."""
+        basin's ``start`` (the built-in solver's loop only). The first: the one recorded for
+        the same inputs (:func:`calibration_key`), where there is one; it is not run again
+        (its loop, None then, is needed only with an external solver)."""
+        recorded = None if start is not None else recorded_calibration(url, name, key)
+        if recorded is not None:
+            say(
+                f"the calibration of {model_label(chosen)} recorded in {name} has the same "
+                "study, data and code: it stands, not run again"
+            )
+            reused[:] = [name]
+            return recorded, None
+        reused.clear()
         return run_calibration(
             spec,
             effects=chosen,
@@ -236,13 +260,12 @@ def _diagnose(
             start=start,
         )
 
+    say = _Say(progress, f"{spec.name}/diagnose")
     fitted, loop = calibrated()
     problem = CalibrationProblem(spec, data, chosen)
-    say = _Say(progress, f"{spec.name}/diagnose")
     correction = _correction(loop, say)
     rebased: list[dict[str, Any]] = []
     spent = 0  # solver runs of the rounds before the last (a calibration replaced)
-    name = calibration_study_name(spec, chosen)
     beaten = beaten_by(url, name, fitted.to_json())
     if beaten is not None:  # an earlier run of this calibration found a better basin
         rebased.append(
@@ -309,6 +332,8 @@ def _diagnose(
         model_ladder(url, spec.name),
         rebased,
     )
+    if reused:
+        result = replace(result, reused_calibration=reused[0])
     if correction is not None:
         result = _with_fidelity(result, refits, loop, fitted, skipped)
     _attach_ladder(url, name, result, fitted.to_json())
@@ -316,7 +341,7 @@ def _diagnose(
     return result
 
 
-def _correction(loop: CalibrationLoop, say: _Say) -> CurveCorrection | None:
+def _correction(loop: CalibrationLoop | None, say: _Say) -> CurveCorrection | None:
     """The correction the current model's calibration learned (None for a built-in study).
 
     Also where that calibration dropped it (too large or too irregular to trust its
@@ -338,7 +363,9 @@ def _correction(loop: CalibrationLoop, say: _Say) -> CurveCorrection | None:
     return loop.correction
 
 
-def _verified_refit(problem: CalibrationProblem, loop: CalibrationLoop, noise: float) -> _Refit:
+def _verified_refit(
+    problem: CalibrationProblem, loop: CalibrationLoop | None, noise: float
+) -> _Refit:
     """The current model at its expensive-verified calibrated point, as a refit: the
     expensive residual, the corrected model's Jacobian for the held-out error (also
     where the expensive solver's own local phase ended without one: budget spent)."""
@@ -355,7 +382,7 @@ def _verified_refit(problem: CalibrationProblem, loop: CalibrationLoop, noise: f
 def _with_fidelity(
     result: DiagnosisResult,
     refits: _Refits,
-    loop: CalibrationLoop,
+    loop: CalibrationLoop | None,
     fitted: CalibrationResult,
     skipped: dict[str, str],
 ) -> DiagnosisResult:
