@@ -114,25 +114,36 @@ def test_a_diagnosis_after_the_same_calibration_takes_it_and_says_the_same(tmp_p
     assert [(c["effect"], c["rmse_n"], c["delta_bic"]) for c in taken.ranking] == figures
 
 
-def test_a_recorded_calibration_is_taken_only_for_the_same_inputs(tmp_path):
+def test_a_recorded_calibration_is_taken_only_for_the_same_inputs(tmp_path, monkeypatch):
     """The key of a calibration's inputs changes with the model, the budget, the tests and
-    the measurements' bytes; there is none for plug-in effects or an external solver."""
+    the measurements' bytes; there is none for an effect not the package's own (a plug-in,
+    or a built-in name a plug-in replaced) or an external solver, with or without the
+    built-in prior."""
     from dataclasses import replace
 
     from surrogate.calibration._calibrate import calibration_key
     from surrogate.calibration._problem import load_calibration
+    from surrogate.effects import _base, get_effect
 
     path = _study(tmp_path, None)
 
-    def key(effects=(), plugins=(), budget=200, tests=None, solver="builtin"):
-        spec = load_calibration(path, effects, ())[0]
-        return calibration_key(replace(spec, solver=solver), effects, plugins, budget, tests)
+    def key(effects=(), budget=200, tests=None, **solver):
+        spec = replace(load_calibration(path, effects, ())[0], **solver)
+        return calibration_key(spec, effects, budget, tests)
 
     first = key()
     assert first is not None and key() == first  # loaded again: the same
     changed = [key(("tension",)), key(budget=100), key(tests=["a1", "b", "c"])]
     assert first not in changed and len(set(changed)) == 3
-    assert key(plugins=("my_effects",)) is None and key(solver="calculix") is None
+    assert key(solver="calculix") is None
+    assert key(solver="calculix", multi_fidelity=False) is None
+
+    class Tension(type(get_effect("tension"))):  # a plug-in's, under the built-in name
+        pass
+
+    monkeypatch.setitem(_base._REGISTRY, "tension", Tension())
+    assert key(("tension",)) is None
+    monkeypatch.undo()
     data = tmp_path / "tests.csv"
     data.write_text(data.read_text(encoding="utf-8") + "\n", encoding="utf-8")
     assert key() != first

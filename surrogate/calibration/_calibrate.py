@@ -14,6 +14,7 @@ import hashlib
 import json
 import logging
 import math
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -27,6 +28,7 @@ from .._errors import InputDataError
 from .._log import show_progress
 from .._pool import check_jobs, one_blas_thread_within
 from .._validate import check_budget
+from ..effects import get_effect
 from ..identify._worker import HEARTBEAT_S
 from ..solvers._fidelity import fidelity_record
 from ..storage._optuna import distributions, quiet_optuna
@@ -275,7 +277,8 @@ def run_calibration(
     start: Mapping[str, float] | None = None,
     queue: Any = None,
     intervals: bool = True,
-) -> tuple[CalibrationResult, CalibrationLoop]:
+    reuse: bool = False,
+) -> tuple[CalibrationResult, CalibrationLoop | None]:
     """:func:`calibrate`, and the loop it ran (the diagnosis reads its correction).
 
     With an external full solver: ``correction`` starts the corrected built-in model
@@ -288,6 +291,8 @@ def run_calibration(
     diagnosis's recalibration of the model in a better basin it found). ``queue`` solves
     the expensive solver's runs (:func:`launched_runs`); without ``intervals`` no profile
     intervals are computed (the linear ones stand, unchecked: a diagnosis's candidates).
+    With ``reuse``, the result recorded for the same :func:`calibration_key` stands where
+    there is one, not run again; its loop is then None (the diagnosis's current model).
     """
     check_jobs(jobs)
     check_budget(max_solver_calls)  # bad options fail before anything is read or written
@@ -300,6 +305,18 @@ def run_calibration(
     cache = spec.directory / ".solver-cache"
     budget = max_solver_calls or spec.budget.calibration_solver_calls
     name = calibration_study_name(spec, chosen)
+    key = None  # a key only for the calibration `calibrate` runs: recorded, from no start
+    if record and expensive and intervals and start is None and correction is None:
+        key = calibration_key(spec, chosen, budget, tests)
+    recorded = recorded_calibration(url, name, key) if reuse else None
+    if recorded is not None:
+        if progress:
+            _LOG.info(
+                "[%s] the calibration recorded with the same study, data and code stands: "
+                "not run again",
+                name,
+            )
+        return recorded, None
     loop: CalibrationLoop
     if not spec.low_fidelity:
         runs = SolverRuns(problem, cache, jobs=jobs, queue=queue)
@@ -348,9 +365,6 @@ def run_calibration(
             result = replace(
                 result, next_test=checked, message=f"{result.message}; {checked['sentence']}"
             )
-        key = None
-        if start is None and correction is None:
-            key = calibration_key(spec, chosen, plugins, budget, tests)
         _record(result.storage, name, problem, loop.verified, result, data_hash(spec), key)
     return result, loop
 
@@ -646,25 +660,30 @@ def data_hash(spec: StudySpec) -> str:
 def calibration_key(
     spec: StudySpec,
     effects: Sequence[str],
-    plugins: Sequence[str],
     budget: int,
     tests: Sequence[Any] | None,
 ) -> str | None:
     """SHA-256 of everything a built-in study's calibration follows from: the study as
     loaded, the model's effects, the budget, the tests calibrated on, the measurements'
-    bytes, the package's source and the numerical libraries' versions (the calibration is
-    deterministic given these: tests/test_calibrate_sweep.py). None where that cannot be
-    said here: an external solver's calibration (the diagnosis needs its loop's
-    correction, not only its result) and plug-in effects (their code is not hashed)."""
-    if spec.low_fidelity or plugins or spec.measurements_file is None:
+    bytes, the package's source, Python's and the numerical libraries' versions (the
+    calibration is deterministic given these: tests/test_calibrate_sweep.py). None where
+    that cannot be said here: an external solver (its program's version is not known
+    here; with the built-in prior, the diagnosis needs the loop's correction too) and an
+    effect that is not the package's own (a plug-in's code is not hashed)."""
+    if spec.solver != "builtin" or spec.measurements_file is None:
         return None
+    if any(not type(get_effect(e)).__module__.startswith("surrogate.") for e in effects):
+        return None
+    import llvmlite
+    import numba
     import scipy
     import sklearn
 
     digest = hashlib.sha256()
     for part in (repr(spec), repr(list(effects)), str(budget), repr(tests), data_hash(spec)):
         digest.update(part.encode() + b"\0")
-    for library in (np, scipy, sklearn, optuna):
+    digest.update(f"{sys.version}\0".encode())
+    for library in (np, scipy, sklearn, optuna, numba, llvmlite):
         digest.update(f"{library.__name__} {library.__version__}\0".encode())
     package = Path(__file__).resolve().parents[1]
     for source in sorted(package.rglob("*.py")):

@@ -61,11 +61,9 @@ from ..storage._storage import check_storage_url, open_storage, refuse_in_memory
 from ._calibrate import (
     CalibrationResult,
     beaten_by,
-    calibration_key,
     calibration_note,
     declared_bound_sides,
     launched_runs,
-    recorded_calibration,
     run_calibration,
     unconverged_reason,
 )
@@ -142,7 +140,8 @@ class DiagnosisResult:
 
     ``reused_calibration``: the calibration study whose recorded result stood for the
     current model's calibration (the same study, data and code, built-in solver: not run
-    again; its runs still count in ``solver_calls``), None where it was run.
+    again; its runs still count in ``solver_calls``), None where it was run (also where a
+    better basin's recalibration replaced it).
     """
 
     rmse_n: float
@@ -230,7 +229,6 @@ def _diagnose(
     expensive_jobs = cpu_jobs(jobs) if spec.low_fidelity else 1
 
     name = calibration_study_name(spec, chosen)
-    key = calibration_key(spec, chosen, plugins, spec.budget.calibration_solver_calls, None)
     reused: list[str] = []  # the study whose recorded calibration stands, if one does
 
     def calibrated(
@@ -238,27 +236,22 @@ def _diagnose(
     ) -> tuple[Any, CalibrationLoop | None]:
         """The current model's calibration (a ladder step), or its replacement from a better
         basin's ``start`` (the built-in solver's loop only). The first: the one recorded for
-        the same inputs (:func:`calibration_key`), where there is one; it is not run again
-        (its loop, None then, is needed only with an external solver)."""
-        recorded = None if start is not None else recorded_calibration(url, name, key)
-        if recorded is not None:
-            say(
-                f"the calibration of {model_label(chosen)} recorded in {name} has the same "
-                "study, data and code: it stands, not run again"
-            )
-            reused[:] = [name]
-            return recorded, None
-        reused.clear()
-        return run_calibration(
+        the same inputs (:func:`~._calibrate.calibration_key`), where there is one; it is
+        not run again (its loop, None then, is needed only with an external solver)."""
+        found, loop = run_calibration(
             spec,
             effects=chosen,
+            plugins=plugins,
             storage=url,
             jobs=expensive_jobs,
             progress=progress,
             certify=False,
             queue=queue,
             start=start,
+            reuse=start is None,
         )
+        reused[:] = [name] if loop is None else []
+        return found, loop
 
     say = _Say(progress, f"{spec.name}/diagnose")
     fitted, loop = calibrated()
@@ -800,6 +793,7 @@ class _Refits:
             queue=self.queue,
             intervals=False,  # a confirmation ranks an effect: it states no intervals
         )
+        assert loop is not None  # run: a recorded result is taken only with reuse
         self.expensive_calls += found.solver_calls
         if found.multi_fidelity is not None:
             self._confirmation_low_runs += found.multi_fidelity["low_fidelity_runs"]

@@ -512,6 +512,7 @@ class _Worker:
             "interrupted": None,
         }
         self._solving = False
+        self._listening = False  # a SIGTERM or SIGINT handler of this loop is installed
 
     def close(self) -> None:
         engine = getattr(getattr(self.storage, "_backend", self.storage), "engine", None)
@@ -527,6 +528,7 @@ class _Worker:
         main_thread = threading.current_thread() is threading.main_thread()
         caught = {sig: catch_signal(sig, self._on_signal) for sig in _SIGNALS if main_thread}
         previous = {sig: handler for sig, handler in caught.items() if handler is not None}
+        self._listening = bool(previous)
         try:
             with storage_errors(self.url):
                 idle_since = time.monotonic()
@@ -668,9 +670,10 @@ class _Worker:
 
     def _stopped_within(self, seconds: float) -> bool:
         """Whether a stop signal has come, or comes within ``seconds`` (its handler runs
-        in this, the main, thread between the sleeps)."""
+        in this, the main, thread between the sleeps; with no handler installed, none
+        can come: no wait)."""
         deadline = time.monotonic() + seconds
-        while self._stop is None and time.monotonic() < deadline:
+        while self._listening and self._stop is None and time.monotonic() < deadline:
             time.sleep(0.05)
         return self._stop is not None
 
