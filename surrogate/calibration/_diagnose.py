@@ -229,7 +229,6 @@ def _diagnose(
     expensive_jobs = cpu_jobs(jobs) if spec.low_fidelity else 1
 
     name = calibration_study_name(spec, chosen)
-    reused: list[str] = []  # the study whose recorded calibration stands, if one does
 
     def calibrated(
         start: Mapping[str, float] | None = None,
@@ -238,7 +237,7 @@ def _diagnose(
         basin's ``start`` (the built-in solver's loop only). The first: the one recorded for
         the same inputs (:func:`~._calibrate.calibration_key`), where there is one; it is
         not run again (its loop, None then, is needed only with an external solver)."""
-        found, loop = run_calibration(
+        return run_calibration(
             spec,
             effects=chosen,
             plugins=plugins,
@@ -250,8 +249,6 @@ def _diagnose(
             start=start,
             reuse=start is None,
         )
-        reused[:] = [name] if loop is None else []
-        return found, loop
 
     say = _Say(progress, f"{spec.name}/diagnose")
     fitted, loop = calibrated()
@@ -325,8 +322,8 @@ def _diagnose(
         model_ladder(url, spec.name),
         rebased,
     )
-    if reused:
-        result = replace(result, reused_calibration=reused[0])
+    if loop is None:  # the recorded calibration stood (a replacement has its loop)
+        result = replace(result, reused_calibration=name)
     if correction is not None:
         result = _with_fidelity(result, refits, loop, fitted, skipped)
     _attach_ladder(url, name, result, fitted.to_json())
