@@ -21,7 +21,13 @@ import pytest
 from scipy import stats
 
 import surrogate
-from surrogate.calibration._synthetic import coverage_sets, write_calibration_study
+from surrogate.calibration._problem import coat_section
+from surrogate.calibration._synthetic import (
+    BASE_TESTS,
+    _set,
+    coverage_sets,
+    write_calibration_study,
+)
 
 SETS = {count: {case["name"]: case for case in coverage_sets(count)} for count in (120, 240)}
 DEEP = 0.6  # the truth's misfit above the fit's, at most (a share of the threshold)
@@ -78,3 +84,23 @@ def test_a_side_whose_first_step_a_range_holds_is_bounded_not_open(tmp_path):
     entry = result.determination["intervals"]["tension.k_e"]
     assert entry["kind"] == "two-sided" and entry["high"] is not None, entry
     assert entry["high"] < 1.1 * entry["value"], entry
+
+
+@pytest.mark.slow
+def test_a_side_whose_refits_fall_back_short_of_their_target_is_not_open(tmp_path):
+    """A coat held at Ecoat's lower bound (truth 0.6/0.35/0.02 GPa/GPa/mm, four tests at
+    10 mm, noise 0.05 N): lowering D in the fit coordinates along log D alone leaves Ecoat
+    held, D where it was. On the code before, the lower side's re-fits fell back to the
+    optimum's D seven times, each under the threshold, and the side was stated open — "the
+    curves determine D ≤ 8.357 only", where the elastic rise fixes D to ±0.06 %."""
+    truth = {"ecoat_gpa": 0.6, "scoat_gpa": 0.35, "tcoat_mm": 0.02}
+    case = _set("held", truth, {}, [], BASE_TESTS, 0.05, 501)
+    path = write_calibration_study(tmp_path, case, seed=0)
+    result = surrogate.calibrate(path, progress=False, record=False)
+    assert result.status == "converged", result.message
+    assert result.params["ecoat_gpa"] == pytest.approx(0.5), result.params  # held there
+    entry = result.determination["combinations"]["bending_stiffness_nmm"]
+    assert entry["kind"] == "two-sided", result.message
+    d, _ = coat_section(truth, 1.2)
+    assert entry["low"] <= d <= entry["high"], (d, entry)
+    assert entry["high"] - entry["low"] < 0.002 * d, entry

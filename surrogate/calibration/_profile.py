@@ -101,6 +101,7 @@ BETTER_CHI2 = 1.0  # a profile point this many s² below the optimum: another ba
 TRUST = 0.2  # a re-fit's Gauss–Newton step moves no coordinate farther than this
 DAMPING = 1e-8  # of ‖J‖²: the re-fit's Gauss–Newton steps, damped
 ONTO_STEPS = 4  # Newton's steps onto the constraint (algebra)
+ONTO_TOLERANCE = 1e-6  # …until q is this share of its range near its target
 OPEN_UNIT = 1e-3  # a step within this share of the quantity's range of its end: at the end
 FD_STEP_Q = 1e-6  # differences of q(x) (algebra, no runs)
 LINEAR_BLIND = 0.5  # a linear end this share of the range away: the linearisation is blind
@@ -297,6 +298,10 @@ class Profiler:
             relearn = relearn and learned is not False  # …until the columns stay unseen
             found = self._step(quantity, q0, sign, x, jac)
             self._log(quantity, sign, step, size, far, found)
+            if found.ratio <= AGREES[1] and found.size <= min(under.size, (1 - OPEN_UNIT) * size):
+                # the re-fit fell back short of its target, under the threshold: it did not
+                # reach the constraint, and says nothing of the side there
+                return self._unfinished(quantity, q0, sign, linear_end, under, over, step + 1)
             if pending is not None:  # ``found`` is the step beyond an end: does it rise on?
                 end, how = pending
                 pending = None
@@ -583,31 +588,46 @@ class Profiler:
         box: along the direction that moves ``q`` at the least misfit by the Gauss–Newton
         model (:func:`_linear_shift`), ``∂q/∂x`` where it has none. Along the raw gradient
         alone, Ecoat held at a thin stiff coat's value moved log D too (the misfit rose
-        10⁵-fold where the valley of equally good coats fitted)."""
-        for _ in range(ONTO_STEPS):
-            gap = target - quantity.scaled(self.model.point(x))
-            gradient = self._gradient(quantity, x)
-            if abs(gap) < 1e-12 or not np.any(gradient):
-                break
-            direction = _linear_shift(jac, gradient, 1.0, capped=False)
-            if not float(gradient @ direction) > 0.0:
+        10⁵-fold where the valley of equally good coats fitted). Where that leaves ``q``
+        short of ``target``, Newton's steps along ``∂q/∂x`` follow: the Gauss–Newton model
+        can send ``q`` along a coordinate a range holds (log D below where Ecoat's lower
+        bound holds it: its column zero in a Jacobian from a held point), where ``q``
+        stays put (seen: D's lower side of a coat held at Ecoat's bound re-fitted at the
+        optimum's D eight times, and was stated open)."""
+        for raw in (False, True):
+            for _ in range(ONTO_STEPS):
+                gap = target - quantity.scaled(self.model.point(x))
+                gradient = self._gradient(quantity, x)
+                if abs(gap) < 1e-12 or not np.any(gradient):
+                    return x
                 direction = gradient / float(gradient @ gradient)
-            moved = np.clip(x + gap * direction, 0.0, 1.0)
-            if np.array_equal(moved, x):
+                if not raw:
+                    shift = _linear_shift(jac, gradient, 1.0, capped=False)
+                    direction = shift if float(gradient @ shift) > 0.0 else direction
+                moved = np.clip(x + gap * direction, 0.0, 1.0)
+                if np.array_equal(moved, x):
+                    break
+                x = moved
+            span = abs(float(np.diff(quantity.range_scaled)[0]))
+            if abs(target - quantity.scaled(self.model.point(x))) <= ONTO_TOLERANCE * span:
                 break
-            x = moved
         return x
 
     def _gradient(self, quantity: Quantity, x: np.ndarray) -> np.ndarray:
-        """``∂q/∂x`` by central differences of algebra (no runs)."""
-        gradient = np.empty(x.size)
-        for j in range(x.size):
-            step = np.zeros(x.size)
-            step[j] = FD_STEP_Q
-            up = self.model.point(np.clip(x + step, 0.0, 1.0))
-            down = self.model.point(np.clip(x - step, 0.0, 1.0))
-            gradient[j] = (quantity.scaled(up) - quantity.scaled(down)) / (2 * FD_STEP_Q)
-        return gradient
+        return quantity_gradient(self.model, quantity, x)
+
+
+def quantity_gradient(model: Any, quantity: Quantity, x: np.ndarray) -> np.ndarray:
+    """``∂q/∂x`` at fit coordinates ``x`` of ``model`` (a :class:`~._local.ResidualModel`)
+    by central differences of algebra (no runs)."""
+    gradient = np.empty(x.size)
+    for j in range(x.size):
+        step = np.zeros(x.size)
+        step[j] = FD_STEP_Q
+        up = model.point(np.clip(x + step, 0.0, 1.0))
+        down = model.point(np.clip(x - step, 0.0, 1.0))
+        gradient[j] = (quantity.scaled(up) - quantity.scaled(down)) / (2 * FD_STEP_Q)
+    return gradient
 
 
 def _ranged(under: _Step, over: _Step) -> bool:

@@ -40,7 +40,6 @@ from .._log import show_progress
 from .._pool import imap_unordered, one_blas_thread_within
 from ..calibration._calibrate import calibration_note, data_hash
 from ..calibration._compare import latest_calibration
-from ..calibration._local import FitCoordinates
 from ..calibration._loop import profiled_quantities
 from ..calibration._problem import CalibrationProblem, calibration_study_name, load_calibration
 from ..effects import available_effects, get_effect
@@ -52,14 +51,13 @@ from ..storage._storage import check_storage_url, open_storage, refuse_in_memory
 from ..study._conditions import RIG_CONDITIONS, rig_for
 from ..study._design import conditions_text
 from ._candidates import as_json, candidate_tests
-from ._information import added_chi2, moved_side, separated
+from ._information import moved_side, refit_chi2, separated
 
 __all__ = ["NextTestResult", "next_test"]
 
 SETTLES = 0.9  # a candidate settles a quantity where it cuts its interval's width by 10 %
 # what a test that does not record a condition was run at (the rig's and the effects' own)
 STEP_UNIT = 1e-3  # the test's sensitivities: differences of this share of each range
-MOVE_UNIT = 1e-3  # …and of a quantity's own coordinate at an open side's re-fit
 PRIOR_UNIT = 0.5  # a Gaussian prior of this share of each range keeps unseen ones finite
 UNRECORDED: dict[str, Any] = {"direction": "warp", "tension_n": 0.0, "rate_deg_s": 90.0}
 
@@ -279,9 +277,9 @@ class _Planner:
         curves = self.curves(fits, tests)
         r = self.design.replicates
         shrink = self._shrink(tests, r)
-        far = self._far_information(alternatives, tests, r)
+        refit, far = self._at_open_sides(alternatives, tests, r)
         predicted = [
-            self._predicted(curves[:, k], alternatives, r, shrink[k], far[:, k])
+            self._predicted(curves[:, k], alternatives, shrink[k], far[:, k], refit[:, k])
             for k in range(len(tests))
         ]
         pairs, pair_curves = self._pairs(diagnosis, tests)
@@ -335,133 +333,134 @@ class _Planner:
                     found.append({"quantity": name, "side": side, **point})
         return found
 
-    # -- the information a test adds at the optimum -------------------------------------------
+    # -- the information a test adds --------------------------------------------------------
+    def _linearised(
+        self, points: Sequence[Mapping[str, float]], tests: list[dict[str, Any]]
+    ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]]:
+        """At each of ``points`` (parameters), in the fit coordinates ``x`` where the valley
+        of equally good coats is straight (differences taken in the declared unit
+        coordinates straddle it, and made a free Ecoat look settled to ±0.05 %): ``(x,
+        J, F, S, g)`` — the measured curves' Jacobian ``J`` (n, p) (the residual model's,
+        its runs mostly the calibration's, in the result cache), the tests' curves ``F``
+        (T, A), their sensitivities ``S`` (T, A, p) (differences of ``STEP_UNIT``, inwards
+        at a bound) and every quantity's ``g = ∂q/∂x``."""
+        from ..calibration._local import ResidualModel
+        from ..calibration._loop import SolverRuns
+        from ..calibration._profile import quantity_gradient
+
+        space, chosen = self.problem.space, tuple(self.problem.effects)
+        runs = SolverRuns(
+            self.problem, self.problem.spec.directory / ".solver-cache", jobs=self.jobs
+        )
+        model = ResidualModel(self.problem, runs)
+        at, fits = [], []
+        for params in points:
+            x = model.pin(np.array([params[n] for n in space.names]))
+            steps = np.where(x + STEP_UNIT <= 1.0, STEP_UNIT, -STEP_UNIT)
+            at.append((x, steps, model.jacobian(x)))
+            fits.append((chosen, dict(params)))
+            fits += [
+                (chosen, dict(zip(space.names, map(float, model.point(x + e)), strict=True)))
+                for e in np.diag(steps)
+            ]
+        self.used.update(runs.used)
+        p = len(space.names)
+        curves = self.curves(fits, tests).reshape(len(points), p + 1, len(tests), -1)
+        out = []
+        for (x, steps, data), c in zip(at, curves, strict=True):
+            sensitivity = np.nan_to_num((c[1:] - c[0]) / steps[:, None, None]).transpose(1, 2, 0)
+            gradients = {n: quantity_gradient(model, q, x) for n, q in self.quantities.items()}
+            out.append((x, data, c[0], sensitivity, gradients))
+        return out
+
+    def _information(
+        self, data: np.ndarray, sensitivity: np.ndarray | None, replicates: int
+    ) -> np.ndarray:
+        """The Fisher information in ``x`` of the measured curves (and of a test's
+        replicates), a Gaussian prior of ``PRIOR_UNIT`` of each coordinate keeping what no
+        curve sees finite."""
+        s2 = self.stored["determination"]["sigma_n"] ** 2
+        information = data.T @ data / s2 + np.eye(data.shape[1]) / PRIOR_UNIT**2
+        if sensitivity is not None:
+            information = information + replicates * sensitivity.T @ sensitivity / s2
+        return information
+
+    def _half(self, information: np.ndarray, gradient: np.ndarray) -> float:
+        """The linear 95 % half-width, in its declared scale, of a quantity of gradient
+        ``gradient``."""
+        s2 = self.stored["determination"]["sigma_n"] ** 2
+        t = math.sqrt(self.threshold * self.noise**2 / s2)
+        return t * math.sqrt(max(float(gradient @ np.linalg.solve(information, gradient)), 0.0))
+
     def _shrink(
         self, tests: list[dict[str, Any]], replicates: int
     ) -> list[dict[str, tuple[float, float]]]:
         """For each test, each quantity's linear half-width with the test over without it
         (≤ 1), and the half-width with it in its declared scale — from the measured curves'
-        Jacobian at the optimum and the test's curve sensitivities there (differences of
-        ``STEP_UNIT`` of each range), a Gaussian prior of ``PRIOR_UNIT`` of each range
-        keeping what no curve sees finite: ``{name: (ratio, half)}``."""
-        space, chosen = self.problem.space, tuple(self.problem.effects)
-        theta = np.array([self.stored["params"][n] for n in space.names])
-        unit = space.to_unit(theta[None, :])[0]
-        data = self._data_jacobian(theta, unit)
-        steps = np.where(unit + STEP_UNIT <= 1.0, STEP_UNIT, -STEP_UNIT)
-        shifted = [
-            (
-                chosen,
-                dict(
-                    zip(
-                        space.names,
-                        map(float, space.from_unit((unit + e)[None, :])[0]),
-                        strict=True,
-                    )
-                ),
-            )
-            for e in np.diag(steps)
-        ]
-        at = self.curves([(chosen, self.stored["params"]), *shifted], tests)
-        s2 = self.stored["determination"]["sigma_n"] ** 2
-        before = data.T @ data / s2 + np.eye(unit.size) / PRIOR_UNIT**2
-        gradients = {name: self._unit_gradient(q, unit) for name, q in self.quantities.items()}
-        t = math.sqrt(self.threshold * self.noise**2 / s2)
+        Jacobian at the optimum and the test's curve sensitivities there:
+        ``{name: (ratio, half)}``."""
+        _, data, _, sensitivity, gradients = self._linearised([self.stored["params"]], tests)[0]
+        before = self._information(data, None, replicates)
         out = []
         for k in range(len(tests)):
-            sensitivity = np.nan_to_num(((at[1:, k] - at[0, k]) / steps[:, None]).T)  # (A, p)
-            after = before + replicates * sensitivity.T @ sensitivity / s2
+            after = self._information(data, sensitivity[k], replicates)
             entry = {}
             for name, g in gradients.items():
-                now = float(g @ np.linalg.solve(before, g))
-                then = float(g @ np.linalg.solve(after, g))
-                ratio = math.sqrt(then / now) if now > 0 else 1.0
-                entry[name] = (min(ratio, 1.0), t * math.sqrt(max(then, 0.0)))
+                now, then = self._half(before, g), self._half(after, g)
+                entry[name] = (min(then / now, 1.0) if now > 0 else 1.0, then)
             out.append(entry)
         return out
 
-    def _far_information(
+    def _at_open_sides(
         self, alternatives: list[dict[str, Any]], tests: list[dict[str, Any]], replicates: int
-    ) -> np.ndarray:
-        """At each open side's re-fit, the linear half-width of its quantity that each test
-        gives there alone (alternatives, tests; inf where it sees nothing, NaN for a closed
-        side): the test closes the side only if it sees the quantity where the side ends,
-        not only at today's optimum (a thicker coat's curves at 5 mm reach no plateau
-        where today's coat does: the one test tells nothing of how large its Mp may be)."""
-        out = np.full((len(alternatives), len(tests)), np.nan)
-        open_sides = [
-            (k, alt)
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """At each open side's re-fit (alternatives, tests; NaN for a closed side, whose
+        shrink is the optimum's information): ``χ²_refit`` of
+        :func:`~._information.refit_chi2`, what each test adds there once the other
+        parameters re-fit to it too; and the linear half-width of the side's quantity there
+        with the test — the test closes the side only if it sees the quantity where the
+        side ends, not only at today's optimum (a thicker coat's curves at 5 mm reach no
+        plateau where today's coat does: the one test tells nothing of how large its Mp
+        may be)."""
+        refit = np.full((len(alternatives), len(tests)), np.nan)
+        far = refit.copy()
+        sides = [
+            k
             for k, alt in enumerate(alternatives)
             if self.entries[alt["quantity"]][alt["side"]] is None
         ]
-        if not open_sides:
-            return out
-        chosen, space = tuple(self.problem.effects), self.problem.space
-        coordinates = FitCoordinates(space, self.problem.spec.rig.thickness_mm)
-        fits, moves = [], []
-        for _, alt in open_sides:
-            theta = np.array([alt["params"][n] for n in space.names])
-            moved = _moved_along(coordinates, space, alt["quantity"], theta)
-            quantity = self.quantities[alt["quantity"]]
-            moves.append(quantity.scaled(moved) - quantity.scaled(theta))
-            fits += [
-                (chosen, alt["params"]),
-                (chosen, dict(zip(space.names, map(float, moved), strict=True))),
-            ]
-        curves = self.curves(fits, tests)
-        s2 = self.stored["determination"]["sigma_n"] ** 2
-        t = math.sqrt(self.threshold * self.noise**2 / s2)
-        for j, ((k, _), move) in enumerate(zip(open_sides, moves, strict=True)):
-            if move == 0.0:
-                out[k] = math.inf
-                continue
-            slope = np.nan_to_num((curves[2 * j + 1] - curves[2 * j]) / move)  # (T, A)
-            information = replicates * np.sum(slope**2, axis=1) / s2
-            out[k] = np.where(
-                information > 0, t / np.sqrt(np.maximum(information, 1e-300)), math.inf
-            )
-        return out
-
-    def _data_jacobian(self, theta: np.ndarray, unit: np.ndarray) -> np.ndarray:
-        """``∂r/∂u`` of the measured curves at the optimum (its runs are mostly the
-        calibration's, in the result cache)."""
-        from ..calibration._local import ResidualModel
-        from ..calibration._loop import SolverRuns
-
-        runs = SolverRuns(self.problem, self.problem.spec.directory / ".solver-cache", jobs=1)
-        model = ResidualModel(self.problem, runs)
-        model.pin(theta)
-        jac = model.unit_jacobian(unit)
-        self.used.update(runs.used)
-        return jac
-
-    def _unit_gradient(self, quantity: Any, unit: np.ndarray) -> np.ndarray:
-        """``∂q/∂u`` in the quantity's declared scale (central differences of algebra)."""
-        space, gradient = self.problem.space, np.empty(unit.size)
-        for j in range(unit.size):
-            step = np.zeros(unit.size)
-            step[j] = 1e-6
-            up = space.from_unit(np.clip(unit + step, 0, 1)[None, :])[0]
-            down = space.from_unit(np.clip(unit - step, 0, 1)[None, :])[0]
-            gradient[j] = (quantity.scaled(up) - quantity.scaled(down)) / 2e-6
-        return gradient
+        if not sides:
+            return refit, far
+        optimum = self._linearised([self.stored["params"]], tests)[0][2]
+        at = self._linearised([alternatives[k]["params"] for k in sides], tests)
+        for k, (x, data, curves, sensitivity, gradients) in zip(sides, at, strict=True):
+            g = gradients[alternatives[k]["quantity"]]
+            for t in range(len(tests)):
+                difference = curves[t] - optimum[t]
+                if not np.all(np.isfinite(difference)):
+                    continue
+                refit[k, t] = refit_chi2(
+                    data, sensitivity[t], difference, g, (-x, 1.0 - x), self.noise, replicates
+                )
+                far[k, t] = self._half(self._information(data, sensitivity[t], replicates), g)
+        return refit, far
 
     def _predicted(
         self,
         curves: np.ndarray,
         alternatives: list[dict[str, Any]],
-        replicates: int,
         shrink: dict[str, tuple[float, float]],
         far: np.ndarray,
+        refit: np.ndarray,
     ) -> dict[str, dict[str, Any]]:
         """Every quantity's interval after the test whose curves (1 + alternatives, A) are
         given. A closed side shrinks by the test's information at the optimum (the linear
         half-width with it over without it, ``shrink``); an open side closes where the
-        test rules out its re-fit at the range's end (what it adds there lifts it over the
-        threshold, :func:`~._information.moved_side`), at the linear half-width with the
+        test rules out its re-fit at the range's end — what it adds there, once the other
+        parameters re-fit to it too (``refit``), lifts it over the threshold
+        (:func:`~._information.moved_side`) — at the linear half-width with the
         test (a quadratic rise from the optimum to that re-fit would promise more than a
         yield onset, a threshold, gives)."""
-        model = curves[0]
         at = {(a["quantity"], a["side"]): k for k, a in enumerate(alternatives, start=1)}
         out: dict[str, dict[str, Any]] = {}
         for name, quantity in self.quantities.items():
@@ -479,7 +478,7 @@ class _Planner:
                     alt = alternatives[k - 1]
                     theta = np.array([alt["params"][n] for n in self.problem.space.names])
                     reach = abs(quantity.scaled(theta) - q0)
-                    chi2 = added_chi2(model, curves[k], self.noise, replicates)
+                    chi2 = float(refit[k - 1])
                     ratio = 0.0 if alt["ratio"] is None else max(float(alt["ratio"]), 0.0)
                     sees = far[k - 1] < reach  # it sees the quantity where the side ends
                     if sees and moved_side(reach, ratio, chi2, self.threshold) is not None:
@@ -705,24 +704,6 @@ class _Planner:
         figure.savefig(path, dpi=110)
         plt.close(figure)
         return str(path)
-
-
-def _moved_along(coordinates: Any, space: Any, name: str, theta: np.ndarray) -> np.ndarray:
-    """``theta`` moved by ``MOVE_UNIT`` in the coordinate that is the quantity alone: log D,
-    log Mp or Tcoat of the fit coordinates (the others held), Ecoat's or Scoat's own, an
-    effect parameter's own; inwards at an upper bound."""
-    unit = space.to_unit(theta[None, :])[0]
-    fit_axis = {"bending_stiffness_nmm": "ie", "plastic_moment_n": "is_", "tcoat_mm": "it"}
-    if coordinates.coating and name in fit_axis:
-        x = coordinates.from_unit(unit)
-        j = getattr(coordinates, fit_axis[name])
-        x[j] += MOVE_UNIT if x[j] + MOVE_UNIT <= 1.0 else -MOVE_UNIT
-        unit = coordinates.to_unit(x)
-    else:
-        j = list(space.names).index(name)
-        unit = unit.copy()
-        unit[j] += MOVE_UNIT if unit[j] + MOVE_UNIT <= 1.0 else -MOVE_UNIT
-    return space.clip(space.from_unit(unit[None, :])[0])
 
 
 def _width(quantity: Any, low: float | None, high: float | None) -> float:

@@ -194,3 +194,31 @@ def test_two_laws_no_bending_test_separates_are_said_to_be_one(tmp_path):
     pairs = [set(item["effects"]) for item in result.inseparable]
     assert {"hardening", "membrane_bending"} in pairs, result.message
     assert "no test inside [design] separates" in result.message
+
+
+@pytest.mark.slow
+def test_a_test_the_other_parameters_absorb_is_not_said_to_settle_a_free_parameter(tmp_path):
+    """Ecoat free at 10 mm (truth 0.6/0.35/0.02, Ecoat held at its bound in the fit): a
+    5 mm test rules out the open side's re-fit (its coat cannot reach the plastic moment
+    the fit yields at), but D and Mp re-fit to it at another Tcoat and leave Ecoat free.
+    On the code before, it was predicted to settle Ecoat to ``≤ 0.5002`` (the truth 0.6):
+    the alternative taken as it stood, and the test's sensitivities differenced across the
+    valley of equally good coats. Measured at the truth, the test leaves Ecoat free."""
+    truth = {"ecoat_gpa": 0.6, "scoat_gpa": 0.35, "tcoat_mm": 0.02}
+    path = write_calibration_study(tmp_path, _set("held", truth, {}, [], BASE_TESTS, 0.05, 501))
+    path.write_text(path.read_text() + DESIGN)
+    assert surrogate.calibrate(path, progress=False).status == "converged"
+    result = surrogate.next_test(path, count=16, plots=False, progress=False)
+    short = [r for r in result.recommended if r["conditions"]["bending_length_mm"] == 5.0]
+    assert short, result.recommended
+    for entry in short:
+        ecoat = entry["predicted"]["ecoat_gpa"]
+        assert ecoat["kind"] == "free", (entry["conditions"], ecoat)
+    conditions = {"tension_n": 0.0, "bending_length_mm": 5.0}
+    tests = [{"test_id": f"short-{k}", **conditions} for k in (1, 2)]
+    added = synthetic_measurements(tests, coating=truth, noise_n=0.05, seed=7)
+    table = pd.read_csv(tmp_path / "tests.csv")
+    table["bending_length_mm"] = 10.0
+    pd.concat([table, added], ignore_index=True).to_csv(tmp_path / "tests.csv", index=False)
+    again = surrogate.calibrate(path, progress=False)
+    assert again.determination["intervals"]["ecoat_gpa"]["kind"] == "free", again.message
