@@ -532,7 +532,10 @@ def _checked_statement(
     if coating_two_sided + bounded:
         text += "; " + ", ".join(coating_two_sided + bounded)
     if any(c["method"] == "unchecked" for c in (*combinations.values(), *intervals.values())):
-        text += "; some ends were not checked (the profiles' budget was spent): linear there"
+        text += (
+            "; some ends were not checked (the profiles' budget was spent, or a re-fit could "
+            "not reach them): linear there, open where the linear interval has no end"
+        )
     for name in linear.held_at_bound:
         k = list(names).index(name)
         text += "; " + at_bound_text(name, int(_held_side(intervals[name], theta[k])), theta[k])

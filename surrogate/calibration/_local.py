@@ -256,6 +256,11 @@ class ResidualModel:
             out[:, k] = 0.0 if curves is None else (shifted_residual - residual) / step
         return out
 
+    def shifted(self, x: np.ndarray, j: int) -> tuple[np.ndarray, float]:
+        """The point of :meth:`jacobian`'s ``j``-th difference, and its step (next-test
+        differences a candidate test's curve at the same points)."""
+        return self._shifted(x, j)
+
     def _shifted(self, x: np.ndarray, j: int) -> tuple[np.ndarray, float]:
         """The point of :meth:`jacobian`'s ``j``-th difference, and its step."""
         step = self.fd_step if x[j] + self.fd_step <= 1.0 else -self.fd_step

@@ -155,8 +155,9 @@ class ProfileSide:
     units), None where the side is *open* (its range end fits under the threshold;
     ``point`` is then the re-fit at that end); ``method`` ``linear`` where the linear
     interval's end was checked and stands, ``profile`` where the re-fits placed it,
-    ``unchecked`` where the budget stopped the profile before it did (the linear end
-    then stands, unchecked); ``ratio`` is ``ΔRSS/Δ`` at ``point``; ``steps`` the
+    ``unchecked`` where the budget stopped the profile before it did, or a re-fit
+    could not reach its target (the linear end then stands, unchecked; open where there is
+    none); ``ratio`` is ``ΔRSS/Δ`` at ``point``; ``steps`` the
     re-fits made; ``point`` the parameters of the last re-fit (an alternative fit the
     data hardly tell from the optimum: what a next test should separate)."""
 
@@ -311,11 +312,12 @@ class Profiler:
                 and AGREES[0] <= found.ratio <= POLISH_BELOW
                 and found.size <= POLISH_SHARE * span
             ):
-                try:
+                try:  # a Jacobian the budget cannot finish is not begun: found stands
+                    self.model.check_jacobian_fits(self.model.coordinates.to_unit(found.x))
                     polished = self._polished(quantity, q0 + sign * size, q0, sign, found)
                 except BudgetSpent:
-                    return self._unfinished(quantity, q0, sign, linear_end, under, over, step)
-                # a polish that lowered nothing: the side's re-fits settle, polish no more
+                    polished = found
+                # a polish that lowered nothing (or that the budget refused): polish no more
                 polishes = polishes + 1 if polished is not found else POLISHES
                 found = polished
                 self._log(quantity, sign, step, size, far, found)
@@ -420,9 +422,9 @@ class Profiler:
         over: _Step | None,
         step: int,
     ) -> ProfileSide:
-        """A side the budget stopped: ``unchecked``, its end the nearest step over the
-        threshold where one was made, else the linear end where no point under the
-        threshold lies beyond it, else open."""
+        """A side the budget stopped, or whose re-fit could not reach its target:
+        ``unchecked``, its end the nearest step over the threshold where one was made, else
+        the linear end where no point under the threshold lies beyond it, else open."""
         end: float | None
         if over is not None:
             end = self._end_value(quantity, q0, sign, over.size)

@@ -57,7 +57,7 @@ __all__ = ["NextTestResult", "next_test"]
 
 SETTLES = 0.9  # a candidate settles a quantity where it cuts its interval's width by 10 %
 # what a test that does not record a condition was run at (the rig's and the effects' own)
-STEP_UNIT = 1e-3  # the test's sensitivities: differences of this share of each range
+SEEN_SHARE = 1e-3  # a test that narrows a quantity by less than this share there sees nothing
 PRIOR_UNIT = 0.5  # a Gaussian prior of this share of each range keeps unseen ones finite
 UNRECORDED: dict[str, Any] = {"direction": "warp", "tension_n": 0.0, "rate_deg_s": 90.0}
 
@@ -276,8 +276,8 @@ class _Planner:
         fits = [(chosen, self.stored["params"])] + [(chosen, alt["params"]) for alt in alternatives]
         curves = self.curves(fits, tests)
         r = self.design.replicates
-        shrink = self._shrink(tests, r)
-        refit, far = self._at_open_sides(alternatives, tests, r)
+        shrink = self._shrink(self._linearised([self.stored["params"]], tests)[0], r)
+        refit, far = self._at_open_sides(alternatives, tests, curves[0], r)
         predicted = [
             self._predicted(curves[:, k], alternatives, shrink[k], far[:, k], refit[:, k])
             for k in range(len(tests))
@@ -340,28 +340,33 @@ class _Planner:
         """At each of ``points`` (parameters), in the fit coordinates ``x`` where the valley
         of equally good coats is straight (differences taken in the declared unit
         coordinates straddle it, and made a free Ecoat look settled to ±0.05 %): ``(x,
-        J, F, S, g)`` — the measured curves' Jacobian ``J`` (n, p) (the residual model's,
-        its runs mostly the calibration's, in the result cache), the tests' curves ``F``
-        (T, A), their sensitivities ``S`` (T, A, p) (differences of ``STEP_UNIT``, inwards
-        at a bound) and every quantity's ``g = ∂q/∂x``."""
+        J, F, S, g)`` — the measured curves' Jacobian ``J`` (n, p) (the residual model's on
+        the built-in solver, as every run here: its runs mostly the calibration's, in the
+        result cache), the tests' curves ``F`` (T, A), their sensitivities ``S`` (T, A, p)
+        (the same differences as ``J``'s, :meth:`ResidualModel.shifted`: inwards at a bound
+        and where Ecoat or Scoat is held at theirs) and every quantity's ``g = ∂q/∂x``."""
+        from ..calibration._fidelity import CorrectedRuns
         from ..calibration._local import ResidualModel
         from ..calibration._loop import SolverRuns
         from ..calibration._profile import quantity_gradient
 
         space, chosen = self.problem.space, tuple(self.problem.effects)
-        runs = SolverRuns(
-            self.problem, self.problem.spec.directory / ".solver-cache", jobs=self.jobs
+        cache = self.problem.spec.directory / ".solver-cache"
+        runs = (
+            SolverRuns(self.problem, cache, jobs=self.jobs)
+            if self.problem.spec.solver == LOW_FIDELITY
+            else CorrectedRuns(self.problem, cache, jobs=self.jobs, correction=None)
         )
         model = ResidualModel(self.problem, runs)
         at, fits = [], []
         for params in points:
             x = model.pin(np.array([params[n] for n in space.names]))
-            steps = np.where(x + STEP_UNIT <= 1.0, STEP_UNIT, -STEP_UNIT)
-            at.append((x, steps, model.jacobian(x)))
+            shifted = [model.shifted(x, j) for j in range(x.size)]
+            at.append((x, np.array([step for _, step in shifted]), model.jacobian(x)))
             fits.append((chosen, dict(params)))
             fits += [
-                (chosen, dict(zip(space.names, map(float, model.point(x + e)), strict=True)))
-                for e in np.diag(steps)
+                (chosen, dict(zip(space.names, map(float, model.point(z)), strict=True)))
+                for z, _ in shifted
             ]
         self.used.update(runs.used)
         p = len(space.names)
@@ -393,16 +398,16 @@ class _Planner:
         return t * math.sqrt(max(float(gradient @ np.linalg.solve(information, gradient)), 0.0))
 
     def _shrink(
-        self, tests: list[dict[str, Any]], replicates: int
+        self, optimum: tuple[Any, ...], replicates: int
     ) -> list[dict[str, tuple[float, float]]]:
         """For each test, each quantity's linear half-width with the test over without it
         (≤ 1), and the half-width with it in its declared scale — from the measured curves'
-        Jacobian at the optimum and the test's curve sensitivities there:
-        ``{name: (ratio, half)}``."""
-        _, data, _, sensitivity, gradients = self._linearised([self.stored["params"]], tests)[0]
+        Jacobian at the optimum and the test's curve sensitivities there (``optimum``:
+        :meth:`_linearised` there): ``{name: (ratio, half)}``."""
+        _, data, _, sensitivity, gradients = optimum
         before = self._information(data, None, replicates)
         out = []
-        for k in range(len(tests)):
+        for k in range(sensitivity.shape[0]):
             after = self._information(data, sensitivity[k], replicates)
             entry = {}
             for name, g in gradients.items():
@@ -412,13 +417,19 @@ class _Planner:
         return out
 
     def _at_open_sides(
-        self, alternatives: list[dict[str, Any]], tests: list[dict[str, Any]], replicates: int
+        self,
+        alternatives: list[dict[str, Any]],
+        tests: list[dict[str, Any]],
+        optimum: np.ndarray,
+        replicates: int,
     ) -> tuple[np.ndarray, np.ndarray]:
         """At each open side's re-fit (alternatives, tests; NaN for a closed side, whose
         shrink is the optimum's information): ``χ²_refit`` of
         :func:`~._information.refit_chi2`, what each test adds there once the other
-        parameters re-fit to it too; and the linear half-width of the side's quantity there
-        with the test — the test closes the side only if it sees the quantity where the
+        parameters re-fit to it too (``optimum``: the optimum's curves at the tests); and the
+        linear half-width of the side's quantity there with the test (inf where the test
+        narrows it by less than ``SEEN_SHARE``: it sees nothing of it there) — the test
+        closes the side only if it sees the quantity where the
         side ends, not only at today's optimum (a thicker coat's curves at 5 mm reach no
         plateau where today's coat does: the one test tells nothing of how large its Mp
         may be)."""
@@ -431,10 +442,10 @@ class _Planner:
         ]
         if not sides:
             return refit, far
-        optimum = self._linearised([self.stored["params"]], tests)[0][2]
         at = self._linearised([alternatives[k]["params"] for k in sides], tests)
         for k, (x, data, curves, sensitivity, gradients) in zip(sides, at, strict=True):
             g = gradients[alternatives[k]["quantity"]]
+            without = self._half(self._information(data, None, replicates), g)
             for t in range(len(tests)):
                 difference = curves[t] - optimum[t]
                 if not np.all(np.isfinite(difference)):
@@ -442,7 +453,9 @@ class _Planner:
                 refit[k, t] = refit_chi2(
                     data, sensitivity[t], difference, g, (-x, 1.0 - x), self.noise, replicates
                 )
-                far[k, t] = self._half(self._information(data, sensitivity[t], replicates), g)
+                with_test = self._half(self._information(data, sensitivity[t], replicates), g)
+                seen = with_test < (1.0 - SEEN_SHARE) * without
+                far[k, t] = with_test if seen else math.inf
         return refit, far
 
     def _predicted(

@@ -217,7 +217,9 @@ def test_a_test_the_other_parameters_absorb_is_not_said_to_settle_a_free_paramet
         ecoat = entry["predicted"]["ecoat_gpa"]
         assert ecoat["kind"] == "free", (entry["conditions"], ecoat)
     conditions = {"tension_n": 0.0, "bending_length_mm": 5.0}
-    predicted = next(r for r in short if r["conditions"] == conditions)["predicted"]["ecoat_gpa"]
+    measured = [r for r in short if r["conditions"] == conditions]
+    assert measured, short
+    predicted = measured[0]["predicted"]["ecoat_gpa"]
     tests = [{"test_id": f"short-{k}", **conditions} for k in (1, 2)]
     added = synthetic_measurements(tests, coating=truth, noise_n=0.05, seed=7)
     table = pd.read_csv(tmp_path / "tests.csv")
