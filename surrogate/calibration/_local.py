@@ -251,7 +251,7 @@ class ResidualModel:
         residual = self.residual(x)
         out = np.empty((residual.size, len(which)))
         for k, j in enumerate(which):
-            shifted, step = self._shifted(x, j)
+            shifted, step = self.shifted(x, j)
             shifted_residual, curves = self.evaluate(shifted)
             out[:, k] = 0.0 if curves is None else (shifted_residual - residual) / step
         return out
@@ -259,10 +259,6 @@ class ResidualModel:
     def shifted(self, x: np.ndarray, j: int) -> tuple[np.ndarray, float]:
         """The point of :meth:`jacobian`'s ``j``-th difference, and its step (next-test
         differences a candidate test's curve at the same points)."""
-        return self._shifted(x, j)
-
-    def _shifted(self, x: np.ndarray, j: int) -> tuple[np.ndarray, float]:
-        """The point of :meth:`jacobian`'s ``j``-th difference, and its step."""
         step = self.fd_step if x[j] + self.fd_step <= 1.0 else -self.fd_step
         shifted = x.copy()
         shifted[j] += step
@@ -282,7 +278,7 @@ class ResidualModel:
         if self.budget is None:
             return
         x = self.coordinates.from_unit(unit)
-        points = [x] + [self._shifted(x, j)[0] for j in range(x.size)]
+        points = [x] + [self.shifted(x, j)[0] for j in range(x.size)]
         pending = [p for p in points if self._key(p) not in self._memo]
         if not pending:
             return

@@ -38,6 +38,16 @@ def _study(folder, *, design=DESIGN, seed=1):
     return path
 
 
+def _measure(folder, tag, conditions, coating, *, seed):
+    """Two replicates of a test at ``conditions``, measured at ``coating`` (noise 0.05 N),
+    added to the study's measurements (the tests measured before were at 10 mm)."""
+    tests = [{"test_id": f"{tag}-{k}", **conditions} for k in (1, 2)]
+    added = synthetic_measurements(tests, coating=coating, noise_n=0.05, seed=seed)
+    table = pd.read_csv(folder / "tests.csv")
+    table["bending_length_mm"] = 10.0
+    pd.concat([table, added], ignore_index=True).to_csv(folder / "tests.csv", index=False)
+
+
 def _cli(*args):
     return subprocess.run(
         [sys.executable, "-m", "surrogate", *map(str, args)], capture_output=True, text=True
@@ -155,11 +165,7 @@ def test_the_realised_interval_is_stated_against_the_predicted(tmp_path):
     surrogate.calibrate(path, progress=False)
     recommended = surrogate.next_test(path, goal="plastic_moment_n", plots=False, progress=False)
     conditions = recommended.recommended[0]["conditions"]
-    tests = [{"test_id": f"next-{k}", **conditions} for k in (1, 2)]
-    added = synthetic_measurements(tests, coating=TRUTH, noise_n=0.05, seed=99)
-    table = pd.read_csv(tmp_path / "tests.csv")
-    table["bending_length_mm"] = 10.0
-    pd.concat([table, added], ignore_index=True).to_csv(tmp_path / "tests.csv", index=False)
+    _measure(tmp_path, "next", conditions, TRUTH, seed=99)
     again = surrogate.calibrate(path, progress=False)
     assert again.next_test is not None, again.message
     assert again.next_test["goal"] == "plastic_moment_n" and again.next_test["ratio"] > 0
@@ -220,11 +226,7 @@ def test_a_test_the_other_parameters_absorb_is_not_said_to_settle_a_free_paramet
     measured = [r for r in short if r["conditions"] == conditions]
     assert measured, short
     predicted = measured[0]["predicted"]["ecoat_gpa"]
-    tests = [{"test_id": f"short-{k}", **conditions} for k in (1, 2)]
-    added = synthetic_measurements(tests, coating=truth, noise_n=0.05, seed=7)
-    table = pd.read_csv(tmp_path / "tests.csv")
-    table["bending_length_mm"] = 10.0
-    pd.concat([table, added], ignore_index=True).to_csv(tmp_path / "tests.csv", index=False)
+    _measure(tmp_path, "short", conditions, truth, seed=7)
     again = surrogate.calibrate(path, progress=False)
     realised = again.determination["intervals"]["ecoat_gpa"]
     assert realised["low"] is None or realised["low"] <= truth["ecoat_gpa"], again.message
