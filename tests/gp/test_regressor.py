@@ -219,3 +219,68 @@ def test_what_the_fast_path_does_not_take():
     two = ConstantKernel() * Matern([1.0, 1.0], nu=2.5) + WhiteKernel()
     with pytest.raises(ValueError, match="same number of dimensions"):
         Regressor(kernel=two, random_state=0).fit(rng.uniform(size=(10, 6)), np.arange(10.0))
+
+
+def _plain_cholesky(K):
+    """The lower Cholesky factor by the textbook loops, one sum at a time (Python floats:
+    the same IEEE double operations in the same order)."""
+    n = len(K)
+    L = [[0.0] * n for _ in range(n)]
+    for j in range(n):
+        pivot = K[j][j]
+        for k in range(j):
+            pivot -= L[j][k] * L[j][k]
+        L[j][j] = pivot**0.5
+        for i in range(j + 1, n):
+            s = K[i][j]
+            for k in range(j):
+                s -= L[i][k] * L[j][k]
+            L[i][j] = s / L[j][j]
+    return np.array(L)
+
+
+def _plain_inverse(L):
+    """``(L Lᵀ)⁻¹`` by the textbook loops: ``L⁻¹`` column by column, then ``L⁻ᵀ L⁻¹``."""
+    n = len(L)
+    inv = [[0.0] * n for _ in range(n)]
+    for j in range(n):
+        inv[j][j] = 1.0 / L[j][j]
+        for i in range(j + 1, n):
+            s = 0.0
+            for k in range(j, i):
+                s -= L[i][k] * inv[k][j]
+            inv[i][j] = s / L[i][i]
+    out = [[0.0] * n for _ in range(n)]
+    for i in range(n):
+        for j in range(i, n):
+            s = 0.0
+            for k in range(j, n):
+                s += inv[k][i] * inv[k][j]
+            out[i][j] = out[j][i] = s
+    return np.array(out)
+
+
+def test_the_compiled_factor_and_inverse_are_the_plain_loops_bit_for_bit():
+    """The compiled Cholesky factor and inverse run four sums side by side (for speed);
+    each sum keeps the plain loops' order, so every bit of both, zeros' signs included, is the
+    plain loops' — on every size, the tails after the groups of four too. A fit's
+    trajectory, and so every calibration, does not depend on that speed-up."""
+    from surrogate.gp._likelihood import _cholesky, _inverse_from_cholesky
+
+    rng = np.random.default_rng(20261202)
+    for n in [*range(1, 14), 18, 31]:
+        for _ in range(3):
+            A = rng.standard_normal((n, n))
+            K = A @ A.T + 0.1 * n * np.eye(n)
+            for alone in rng.choice(n, size=n // 3, replace=False):
+                K[alone, :] = K[:, alone] = 0.0  # exact zeros in the factor and its inverse
+                K[alone, alone] = 1.0
+            L, regular = _cholesky(K)
+            assert regular
+            plain = _plain_cholesky(K.tolist())
+            assert np.array_equal(L, plain) and np.array_equal(np.signbit(L), np.signbit(plain))
+            inverse, plain = _inverse_from_cholesky(L), _plain_inverse(L.tolist())
+            assert np.array_equal(inverse, plain)
+            assert np.array_equal(np.signbit(inverse), np.signbit(plain))
+    singular = np.ones((5, 5))
+    assert not _cholesky(singular)[1]
