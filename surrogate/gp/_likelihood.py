@@ -160,11 +160,11 @@ def _cholesky(K):  # pragma: no cover - compiled
             L[i, j], L[i + 1, j] = s0 / L[j, j], s1 / L[j, j]
             L[i + 2, j], L[i + 3, j] = s2 / L[j, j], s3 / L[j, j]
             i += 4
-        for i in range(i, n):
-            s = K[i, j]
+        for row in range(i, n):  # the rows after the groups of four
+            s = K[row, j]
             for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
+                s -= L[row, k] * L[j, k]
+            L[row, j] = s / L[j, j]
     return L, True
 
 
@@ -200,11 +200,11 @@ def _inverse_from_cholesky(L):  # pragma: no cover - compiled
             T[j, i], T[j + 1, i] = s0 / L[i, i], s1 / L[i, i]
             T[j + 2, i], T[j + 3, i] = s2 / L[i, i], s3 / L[i, i]
             j += 4
-        for j in range(j, i):
+        for rest in range(j, i):
             s = 0.0
-            for k in range(j, i):
-                s -= L[i, k] * T[j, k]
-            T[j, i] = s / L[i, i]
+            for k in range(rest, i):
+                s -= L[i, k] * T[rest, k]
+            T[rest, i] = s / L[i, i]
     inverse = np.empty((n, n))
     for i in range(n):  # inverse[i, j] = Σ_{k=j}^{n−1} T[i, k]·T[j, k], j ≥ i
         j = i
@@ -228,9 +228,9 @@ def _inverse_from_cholesky(L):  # pragma: no cover - compiled
             inverse[i, j + 2] = inverse[j + 2, i] = s2
             inverse[i, j + 3] = inverse[j + 3, i] = s3
             j += 4
-        for j in range(j, n):
+        for rest in range(j, n):
             s = 0.0
-            for k in range(j, n):
-                s += T[i, k] * T[j, k]
-            inverse[i, j] = inverse[j, i] = s
+            for k in range(rest, n):
+                s += T[i, k] * T[rest, k]
+            inverse[i, rest] = inverse[rest, i] = s
     return inverse
