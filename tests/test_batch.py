@@ -9,7 +9,8 @@ import pytest
 
 from surrogate import PAPER_SPACE, SampleSet, make_design
 from surrogate._pool import imap_unordered, one_blas_thread_within
-from surrogate.solvers._batch import evaluate_design
+from surrogate.solvers import _batch
+from surrogate.solvers._batch import IN_PROCESS_RUNS, evaluate_design, solved
 from tests.conftest import CountingSolve
 
 
@@ -44,7 +45,11 @@ def test_interrupted_batch_resumes_where_it_stopped(tmp_path, design):
     assert resumed.calls == 2 and len(samples.ok) == 6
 
 
-def test_workers_give_the_same_results(tmp_path, design):
+@pytest.mark.parametrize("in_process_runs", [2, IN_PROCESS_RUNS])
+def test_workers_give_the_same_results(tmp_path, design, monkeypatch, in_process_runs):
+    """With ``jobs`` = 2 the six runs are solved in two processes (a batch at least
+    ``IN_PROCESS_RUNS`` long) or in this one: the same runs, bit for bit, as ``jobs`` = 1."""
+    monkeypatch.setattr(_batch, "IN_PROCESS_RUNS", in_process_runs)
     serial = evaluate_design(design, PAPER_SPACE, progress=False)
     parallel = evaluate_design(design, PAPER_SPACE, jobs=2, progress=False)
     pd.testing.assert_frame_equal(serial.runs, parallel.runs)
@@ -111,3 +116,28 @@ def test_the_api_computes_with_one_blas_thread_and_gives_the_callers_back():
     assert len(seen[0]) >= 2 and seen == [[1] * len(seen[0])] * 2  # NumPy's and SciPy's
     assert after == [2] * len(after)
     assert simulate.__wrapped__ is not None and simulate.__name__ == "simulate"
+
+
+def _where(inputs):
+    """Where a run was solved: the process, and its BLAS threads."""
+    from threadpoolctl import threadpool_info
+
+    blas = [info["num_threads"] for info in threadpool_info() if info["user_api"] == "blas"]
+    return {"pid": os.getpid(), "blas": max(blas)}
+
+
+def test_a_short_batch_of_built_in_runs_is_solved_here_and_the_rest_in_processes(monkeypatch):
+    """A built-in run takes milliseconds, a pool of processes tens of them to start: a batch of
+    fewer than ``IN_PROCESS_RUNS`` built-in runs is solved in this process, with one BLAS
+    thread as a child has; an external solver's runs (minutes each) and a long batch go to
+    ``jobs`` processes."""
+    from threadpoolctl import threadpool_limits
+
+    builtin = [{"solver": "builtin", "run": i} for i in range(6)]
+    external = [{"solver": "calculix", "run": i} for i in range(2)]
+    with threadpool_limits(2, user_api="blas"):
+        here = [result for _, result in solved(builtin, 2, _where)]
+    assert {r["pid"] for r in here} == {os.getpid()} and {r["blas"] for r in here} == {1}
+    assert os.getpid() not in {r["pid"] for _, r in solved(external, 2, _where)}
+    monkeypatch.setattr(_batch, "IN_PROCESS_RUNS", 6)
+    assert os.getpid() not in {r["pid"] for _, r in solved(builtin, 2, _where)}

@@ -35,10 +35,9 @@ import numpy as np
 from scipy.optimize import minimize
 from scipy.stats import qmc
 
-from .._pool import imap_unordered
 from ..gp import CurveSurrogate
 from ..physics import curve_features
-from ..solvers._batch import solve_inputs
+from ..solvers._batch import solved
 from ..solvers._cache import ResultCache, input_hash
 from ..solvers._fidelity import LOW_FIDELITY
 from ._basins import (
@@ -217,12 +216,8 @@ class SolverRuns:
         results, todo = self.cache.hits(keys)
         started = time.monotonic()
         batch = [items[i][2] for i in todo]
-        solved = (
-            imap_unordered(solve_inputs, batch, self.jobs)
-            if self.queue is None
-            else self.queue(batch)
-        )
-        for done, (j, result) in enumerate(solved, 1):
+        finished = solved(batch, self.jobs) if self.queue is None else self.queue(batch)
+        for done, (j, result) in enumerate(finished, 1):
             i = todo[j]
             self.cache.put(keys[i], items[i][2], result)
             results[i] = result

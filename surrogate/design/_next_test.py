@@ -37,13 +37,13 @@ import optuna
 from .._errors import InputDataError
 from .._io import check_output_folder
 from .._log import show_progress
-from .._pool import imap_unordered, one_blas_thread_within
+from .._pool import one_blas_thread_within
 from ..calibration._calibrate import calibration_note, data_hash
 from ..calibration._compare import latest_calibration
 from ..calibration._loop import profiled_quantities
 from ..calibration._problem import CalibrationProblem, calibration_study_name, load_calibration
 from ..effects import available_effects, get_effect
-from ..solvers._batch import solve_inputs, solver_inputs
+from ..solvers._batch import solved, solver_inputs
 from ..solvers._cache import ResultCache, input_hash
 from ..solvers._fidelity import LOW_FIDELITY
 from ..storage._optuna import quiet_optuna
@@ -250,7 +250,7 @@ class _Planner:
                 )
         keys = [input_hash(inputs) for inputs in items]
         results, todo = self.cache.hits(keys)
-        for j, result in imap_unordered(solve_inputs, [items[i] for i in todo], self.jobs):
+        for j, result in solved([items[i] for i in todo], self.jobs):
             self.cache.put(keys[todo[j]], items[todo[j]], result)
             results[todo[j]] = result
         self.used.update(keys)
