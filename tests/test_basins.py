@@ -6,6 +6,11 @@ a_s 0.7), noise 0.06 N. Calibrated with ``anisotropy`` and study seed 2, the cod
 the basin search ended ``converged`` at 20.9 × the noise (a_e 0.54, a_s 1.37: no weft test
 yields there), and the diagnosis of that model named ``friction`` (0.059 N), which is not
 in the data; seeds 0, 1 and 3–7 reach the noise floor (0.98 × noise).
+
+Whether a global phase ends in that basin depends on the last bits of its surrogate's fits:
+seed 2 did with OpenBLAS's SkylakeX kernels and did not with its Haswell ones (the same
+machine, ``OPENBLAS_CORETYPE``). The tests of what follows put it there
+(:func:`_stuck_in_the_other_basin`) instead of counting on a seed.
 """
 
 import json
@@ -16,7 +21,7 @@ import pytest
 import surrogate
 import surrogate.calibration._loop as loop_module
 from surrogate.calibration._basins import spread_rows
-from surrogate.calibration._loop import THIN_UNIT
+from surrogate.calibration._loop import THIN_UNIT, CalibrationLoop
 from surrogate.calibration._synthetic import (
     anisotropy_basin_set,
     calibration_sets,
@@ -42,8 +47,47 @@ def _no_basin_search(monkeypatch):
     monkeypatch.setattr(loop_module.CalibrationLoop, "follow_better", lambda self, b: False)
 
 
-def test_a_calibration_in_another_basin_searches_and_reaches_the_noise_floor(tmp_path):
-    path = write_calibration_study(tmp_path, CASE, seed=2)
+# near the other basin's local optimum (1.27 N, 21 × the noise: a_e 0.54, a_s 1.75)
+OTHER_BASIN = {
+    "ecoat_gpa": 0.95,
+    "scoat_gpa": 0.12,
+    "tcoat_mm": 0.055,
+    "anisotropy.a_e": 0.55,
+    "anisotropy.a_s": 1.35,
+}
+
+
+def _stuck_in_the_other_basin(monkeypatch):
+    """The anisotropy model's global phase ends at ``OTHER_BASIN`` (its initial design
+    run, then that point verified) and the surrogate shows no other basin after its local
+    phase: the calibration's first local optimum is the other basin's, on every machine
+    (the local phase from there ends at 21 × the noise with OpenBLAS's SkylakeX and
+    Haswell kernels alike). Other models' calibrations (a diagnosis's candidates) run as
+    they are."""
+    names = tuple(OTHER_BASIN)
+    global_phase, other_basin = CalibrationLoop._global, CalibrationLoop._other_basin
+
+    def ended_there(self, model, surrogate_trials):
+        if tuple(self.problem.space.names) != names:
+            return global_phase(self, model, surrogate_trials)
+        self._initial_design()
+        self._verify(np.array([OTHER_BASIN[n] for n in names]), None)
+
+    def none_there(self, model, surrogate_trials):
+        if tuple(self.problem.space.names) != names:
+            return other_basin(self, model, surrogate_trials)
+        return None
+
+    monkeypatch.setattr(CalibrationLoop, "_global", ended_there)
+    monkeypatch.setattr(CalibrationLoop, "_other_basin", none_there)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_calibration_in_another_basin_searches_and_reaches_the_noise_floor(
+    tmp_path, monkeypatch, seed
+):
+    _stuck_in_the_other_basin(monkeypatch)
+    path = write_calibration_study(tmp_path, CASE, seed=seed)
     result = surrogate.calibrate(path, progress=False)
     assert result.status == "converged", result.message
     assert result.rmse_n <= NEAR_NOISE * result.noise_n, result.message
@@ -82,7 +126,8 @@ def test_every_study_seed_reaches_the_noise_floor(tmp_path, name, seeds):
 
 
 @pytest.mark.slow
-def test_the_diagnosis_names_no_effect_the_basin_explains(tmp_path):
+def test_the_diagnosis_names_no_effect_the_basin_explains(tmp_path, monkeypatch):
+    _stuck_in_the_other_basin(monkeypatch)
     result = surrogate.diagnose(write_calibration_study(tmp_path, CASE, seed=2), progress=False)
     assert not result.verdict.startswith("missing effect"), result.verdict
     assert not result.systematic and result.rmse_n <= NEAR_NOISE * result.noise_n
@@ -91,6 +136,7 @@ def test_the_diagnosis_names_no_effect_the_basin_explains(tmp_path):
 @pytest.mark.slow
 def test_the_diagnosis_finds_the_basin_a_calibration_missed(tmp_path, monkeypatch):
     # the calibration's own search switched off: the diagnosis's check must catch it
+    _stuck_in_the_other_basin(monkeypatch)
     _no_basin_search(monkeypatch)
     path = write_calibration_study(tmp_path, CASE, seed=2)
     result = surrogate.diagnose(path, progress=False, jobs=1)
@@ -109,6 +155,7 @@ def test_the_diagnosis_finds_the_basin_a_calibration_missed(tmp_path, monkeypatc
 def test_compare_says_when_another_basin_beats_the_calibration(tmp_path, monkeypatch):
     path = write_calibration_study(tmp_path, CASE, seed=1)
     good = surrogate.calibrate(path, progress=False)  # the truth's basin, recorded
+    _stuck_in_the_other_basin(monkeypatch)
     _no_basin_search(monkeypatch)
     text = path.read_text().replace("seed = 1", "seed = 2")
     path.write_text(text)

@@ -147,6 +147,31 @@ def test_cli_calibrate_json_then_compare(tmp_path, capsys):
         assert figure in attrs
 
 
+def test_the_points_elsewhere_stay_within_the_budget(tmp_path, monkeypatch):
+    """The surrogate's best points elsewhere (for the profiles) are verifications like any
+    other: with one left, one is run, not all of them (three had been run, 42 solver calls
+    of a budget of 40, on a calibration whose trajectory left one verification there)."""
+    from surrogate.calibration._basins import Start
+    from surrogate.calibration._loop import CalibrationLoop
+    from surrogate.gp import CurveSurrogate
+
+    path = _study(tmp_path, BASE_TESTS[:2] + BASE_TESTS[2:3], budget=200)
+    _, loop = run_calibration(path, progress=False, record=False, intervals=False)
+    assert loop is not None and loop.converged_at_best()
+    problem = loop.problem
+    loop.budget = loop.calibration_calls + problem.runs_per_point  # one verification left
+    space = problem.space
+    starts = [
+        Start(space.from_unit(np.full((1, len(space)), u))[0], "a test's start")
+        for u in (0.2, 0.5, 0.8)
+    ]
+    monkeypatch.setattr(CalibrationLoop, "_regions", lambda self, model, trials: starts)
+    model = CurveSurrogate(problem.features, len(problem.groups), seed=1)
+    loop._fit(model)
+    found = loop._elsewhere(model, 100)
+    assert len(found) == 1 and loop.calibration_calls == loop.budget
+
+
 @pytest.mark.slow
 def test_compare_shows_where_the_base_model_fails(tmp_path):
     hidden = {"tension": {"k_e": 0.01, "k_s": 0.01}}

@@ -465,6 +465,8 @@ class CalibrationLoop:
             return []
         found = []
         for start in self._regions(model, surrogate_trials):
+            if not self.verifications_left():  # each point is a verification: within the budget
+                break
             theta, predicted = self._polish(model, start.theta)
             out = self.runs.run(*self.problem.at_every_group(theta))
             if any(o is None for o in out):

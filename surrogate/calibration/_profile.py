@@ -72,6 +72,7 @@ __all__ = [
     "Profile",
     "ProfileSide",
     "Quantity",
+    "end_value",
     "profile",
 ]
 
@@ -84,7 +85,9 @@ FIRST_EVALUATIONS = 2  # …of a side's first (the linear end's check)
 FAR_OVER = 25.0  # a re-fit this far over the threshold (ρ) after a step that no longer
 # halved it: no more steps
 PIN_UNIT = 1e-4  # a parameter this near a bound (share of its range) is held by it
-FLAT = 0.1  # ρ under this up to where a range holds the step over: the ranges end the side
+FLAT = 0.1  # ρ under this where a side starts: the misfit flat there (a blind side relearns)
+RISEN = 0.25  # an unchecked side's end stands where its re-fits rose at least this share of a
+# quadratic rise to it (√ρ half as fast): else nothing the profile saw bounds it there
 OPEN_PRECISION = 0.1  # …found to within this share of the quantity's range
 CONFIRM = 2.0  # an end is confirmed by a re-fit this much farther out…
 CONFIRM_RATIO = 2.0  # …whose ρ reaches this (a quadratic rise gives 4): else it was roughness
@@ -381,17 +384,17 @@ class Profiler:
             return ProfileSide(linear_end, "linear", end.ratio, steps, end.point(self))
         size = end.size / math.sqrt(end.ratio) if 0.0 < end.ratio < 1.0 else end.size
         far = abs(quantity.range_scaled[1 if sign > 0 else 0] - q0)
-        value = self._end_value(quantity, q0, sign, min(size, far))
+        value = end_value(quantity, q0, sign, min(size, far))
         return ProfileSide(value, "profile", end.ratio, steps, end.point(self))
 
     def _bracketed(
         self, quantity: Quantity, q0: float, sign: float, under: _Step, over: _Step, steps: int
     ) -> ProfileSide:
         """The side ended between a point under the threshold and one over it: at the one
-        over (the wider interval) — or open where the misfit was flat (``ρ`` under
-        ``FLAT``) up to where a range holds the one over (a parameter at a bound the
-        optimum was not at): there the ranges end it, not the curves (Tcoat along the
-        valley of equally good coats, until Ecoat reaches its bound)."""
+        over (the wider interval) — or open where a range holds the one over (a parameter
+        at a bound the optimum was not at) before the misfit's rise would have reached the
+        threshold (:func:`_ranged`): there the ranges end it, not the curves (Tcoat along
+        the valley of equally good coats, until Ecoat reaches its bound)."""
         if _ranged(under, over):
             return ProfileSide(None, "profile", under.ratio, steps, under.point(self))
         return self._ended(quantity, q0, sign, over, steps)
@@ -400,17 +403,8 @@ class Profiler:
         self, quantity: Quantity, q0: float, sign: float, found: _Step, steps: int
     ) -> ProfileSide:
         """The side ended at ``found`` (open where that is the range's end)."""
-        end = self._end_value(quantity, q0, sign, found.size)
+        end = end_value(quantity, q0, sign, found.size)
         return ProfileSide(end, "profile", found.ratio, steps, found.point(self))
-
-    def _end_value(self, quantity: Quantity, q0: float, sign: float, size: float) -> float | None:
-        """The quantity at ``|η| = size`` on this side; None at the range's end (the
-        ranges, not the curves, end it there)."""
-        end = quantity.range_scaled[1 if sign > 0 else 0]
-        span = abs(np.diff(quantity.range_scaled)[0])
-        if abs(end - (q0 + sign * size)) <= OPEN_UNIT * span:
-            return None
-        return quantity.unscaled(q0 + sign * size)
 
     def _unfinished(
         self,
@@ -424,14 +418,21 @@ class Profiler:
     ) -> ProfileSide:
         """A side the budget stopped, or whose re-fit could not reach its target:
         ``unchecked``, its end the nearest step over the threshold where one was made, else
-        the linear end where no point under the threshold lies beyond it, else open."""
-        end: float | None
+        the linear end where no point under the threshold lies beyond it, else open — and
+        open where the side's own re-fits contradict that end: the misfit at the farthest
+        point under the threshold less than ``RISEN`` of what a quadratic rise to the end
+        gives there (cover-075 of 120: "Scoat ≥ 0.239", from a first re-fit at the linear
+        end that had not settled, ρ 2.6·10⁶, with ρ 4·10⁻⁴ at 0.25 and the truth, 0.213,
+        fitting as well; the end is then a guess, and the side is stated open)."""
+        end: float | None = None
         if over is not None:
-            end = self._end_value(quantity, q0, sign, over.size)
+            end = end_value(quantity, q0, sign, over.size)
         elif linear_end is not None and abs(quantity.scale(linear_end) - q0) > under.size:
             end = linear_end
-        else:
-            end = None
+        if end is not None and under.size > 0.0:
+            size = abs(quantity.scale(end) - q0)
+            if under.ratio < RISEN * (under.size / size) ** 2:
+                end = None
         return ProfileSide(end, "unchecked", None, step - 1, under.point(self))
 
     def _farthest_under(self, quantity: Quantity, q0: float, sign: float) -> _Step:
@@ -658,6 +659,16 @@ class Profiler:
         return quantity_gradient(self.model, quantity, x)
 
 
+def end_value(quantity: Quantity, q0: float, sign: float, size: float) -> float | None:
+    """The quantity at ``|η| = size`` from ``q0`` (declared scale) on the side ``sign``; None
+    within ``OPEN_UNIT`` of its range's end: the ranges, not the curves, end it there."""
+    end = quantity.range_scaled[1 if sign > 0 else 0]
+    span = abs(np.diff(quantity.range_scaled)[0])
+    if abs(end - (q0 + sign * size)) <= OPEN_UNIT * span:
+        return None
+    return quantity.unscaled(q0 + sign * size)
+
+
 def quantity_gradient(model: Any, quantity: Quantity, x: np.ndarray) -> np.ndarray:
     """``∂q/∂x`` at fit coordinates ``x`` of ``model`` (a :class:`~._local.ResidualModel`)
     by central differences of algebra (no runs)."""
@@ -672,12 +683,24 @@ def quantity_gradient(model: Any, quantity: Quantity, x: np.ndarray) -> np.ndarr
 
 
 def _ranged(under: _Step, over: _Step) -> bool:
-    """Whether the ranges, not the curves, end a side: the misfit flat (``ρ`` under
-    ``FLAT``) along it at least as far as the rest of the bracket, up to a step over the
-    threshold that a range holds. A flat optimum and a held first step are no such
-    stretch: cover-037's plastic moment, ρ 7·10⁵ at −19 % with Scoat at its bound, had
-    been stated free in its range."""
-    return over.held and under.ratio < FLAT and under.size >= over.size - under.size
+    """Whether the ranges, not the curves, end a side: the step over the threshold is one a
+    range holds, the bracket is no wider than the stretch under the threshold before it,
+    and the misfit's rise up to ``under`` would not have reached the threshold by ``over``
+    (``ρ`` grows as ``η²`` where the curves bound a quantity: ``ρ_under · (η_over /
+    η_under)² < 1``). A flat optimum and a held first step are no such stretch: cover-037's
+    plastic moment, ρ 7·10⁵ at −19 % with Scoat at its bound, had been stated free in its
+    range.
+
+    Where the range's wall comes first, ``ρ`` leaps at it (Ecoat up a calibration with
+    tension: ρ 0.44 where Tcoat reached its lower bound, 2.8·10⁴ 5 % of the range beyond);
+    where the curves come first, it rises on (cover-011's ``k_e``: 0.31, 0.73, 1.0, 4.1,
+    every re-fit held). The rule before, ``ρ_under`` under 0.1, straddled a side whose every
+    re-fit had Ecoat held at its bound and paid the same ``ρ`` (0.107, the curves blind to
+    Mp: no plateau before 90°) with the last bits of the fit: ended on one machine, open on
+    another."""
+    if not (over.held and 0.0 < under.size and under.size >= over.size - under.size):
+        return False
+    return under.ratio * (over.size / under.size) ** 2 < 1.0
 
 
 def _pinned(unit: np.ndarray) -> np.ndarray:

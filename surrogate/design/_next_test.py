@@ -42,6 +42,7 @@ from ..calibration._calibrate import calibration_note, data_hash
 from ..calibration._compare import latest_calibration
 from ..calibration._loop import profiled_quantities
 from ..calibration._problem import CalibrationProblem, calibration_study_name, load_calibration
+from ..calibration._profile import end_value
 from ..effects import available_effects, get_effect
 from ..solvers._batch import solved, solver_inputs
 from ..solvers._cache import ResultCache, input_hash
@@ -496,7 +497,7 @@ class _Planner:
                     sees = far[k - 1] < reach  # it sees the quantity where the side ends
                     if sees and moved_side(reach, ratio, chi2, self.threshold) is not None:
                         size = min(reach, max(half_after, far[k - 1]))
-                ends[side] = None if size is None else quantity.unscaled(q0 + sign * size)
+                ends[side] = None if size is None else end_value(quantity, q0, sign, size)
             now = _width(quantity, entry["low"], entry["high"])
             after = _width(quantity, ends["low"], ends["high"])
             out[name] = {
