@@ -183,9 +183,11 @@ def run_case(task: tuple[int, int]) -> dict[str, Any]:
         "predicted": predicted,
         "realised": realised,
         "covered": realised["recommended"].get("covered"),
-        "beats_reference_2x": shrink.get("recommended", 0)
-        >= 2 * max(shrink.get("reference", 0), 0),
+        # a shrink of nothing beats nothing: the recommended test must narrow the goal
+        "beats_reference_2x": shrink.get("recommended", 0) > 0
+        and shrink.get("recommended", 0) >= 2 * max(shrink.get("reference", 0), 0),
         "beats_random_2x": bool(randoms)
+        and shrink.get("recommended", 0) > 0
         and shrink.get("recommended", 0) >= 2 * max(statistics.median(randoms), 0),
         "realised_over_predicted": None if got is None or predicted <= 0 else got / predicted,
         "message": advice.message,

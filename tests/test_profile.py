@@ -23,12 +23,14 @@ from scipy import stats
 import surrogate
 from surrogate.calibration._calibrate import run_calibration
 from surrogate.calibration._problem import coat_section
+from surrogate.calibration._profile import Profile, ProfileSide, Quantity, projected
 from surrogate.calibration._synthetic import (
     BASE_TESTS,
     _set,
     coverage_sets,
     write_calibration_study,
 )
+from surrogate.physics import bending_stiffness
 
 SETS = {count: {case["name"]: case for case in coverage_sets(count)} for count in (120, 240)}
 DEEP = 0.6  # the truth's misfit above the fit's, at most (a share of the threshold)
@@ -132,3 +134,36 @@ def test_a_side_near_the_threshold_is_judged_on_a_settled_refit(tmp_path):
     entry = result.determination["intervals"]["tension.k_s"]
     truth = case["hidden"]["tension"]["k_s"]
     assert entry["kind"] == "two-sided" and entry["low"] <= truth <= entry["high"], entry
+
+
+def _side(end, method="profile"):
+    return ProfileSide(end, method, 0.5, 3, None)
+
+
+def test_ecoat_is_projected_from_the_bending_stiffness_and_tcoat():
+    """Ecoat = D / d(Tcoat) over the box of the two intervals: least at D's lower end and
+    Tcoat's upper one; a side open where the side it comes from is open (the ranges, not
+    the curves, end it there), or where it reaches Ecoat's range; unchecked where one it
+    comes from is. Against the closed form of the coat's section."""
+    thickness = 1.2
+    per_gpa = lambda t: bending_stiffness(1000.0, t, thickness)  # noqa: E731
+    ecoat = Quantity("ecoat_gpa", lambda theta: float(theta[0]), True, 0.5, 4.0)
+    d = Profile("bending_stiffness_nmm", 10.0, _side(9.99), _side(10.01, "linear"))
+    t = Profile("tcoat_mm", 0.02, _side(0.018), _side(0.022, "unchecked"))
+    value = 10.0 / per_gpa(0.02)
+    found = projected(ecoat, value, d, t, per_gpa, (0.01, 0.1))
+    assert found.lower.end == pytest.approx(9.99 / per_gpa(0.022), rel=1e-12)
+    assert found.upper.end == pytest.approx(10.01 / per_gpa(0.018), rel=1e-12)
+    assert found.lower.end < value < found.upper.end and found.kind == "two-sided"
+    assert found.lower.method == "unchecked" and found.upper.method == "profile"
+    # every coat of the box lies inside
+    for dd in (9.99, 10.0, 10.01):
+        for tt in (0.018, 0.02, 0.022):
+            assert found.lower.end <= dd / per_gpa(tt) * (1 + 1e-12)
+            assert dd / per_gpa(tt) <= found.upper.end * (1 + 1e-12)
+    # Tcoat open above (its range ends it): Ecoat open below
+    t_open = Profile("tcoat_mm", 0.02, _side(0.018), _side(None))
+    assert projected(ecoat, value, d, t_open, per_gpa, (0.01, 0.1)).kind == "upper-bound"
+    # a thin coat at Tcoat's lower end would need Ecoat beyond its range: open above
+    t_thin = Profile("tcoat_mm", 0.02, _side(0.0021), _side(0.022))
+    assert projected(ecoat, value, d, t_thin, per_gpa, (0.001, 0.1)).upper.end is None
