@@ -28,6 +28,7 @@ from surrogate.calibration._synthetic import (
     BASE_TESTS,
     _set,
     coverage_sets,
+    synthetic_measurements,
     write_calibration_study,
 )
 from surrogate.physics import bending_stiffness
@@ -167,3 +168,27 @@ def test_ecoat_is_projected_from_the_bending_stiffness_and_tcoat():
     # a thin coat at Tcoat's lower end would need Ecoat beyond its range: open above
     t_thin = Profile("tcoat_mm", 0.02, _side(0.0021), _side(0.022))
     assert projected(ecoat, value, d, t_thin, per_gpa, (0.001, 0.1)).upper.end is None
+
+
+@pytest.mark.slow
+def test_the_plastic_moments_lower_side_is_the_curves_never_the_ranges(tmp_path):
+    """A coat whose curves at 10 mm show no plateau (truth 1.0/0.4/0.012 GPa/GPa/mm), six
+    tests: lowering Mp makes it yield within the test, so the curves bound Mp from below at
+    every coat. Its re-fits there had ρ 0.22 a step short of the rise and 12.9 a step
+    beyond, a range holding both; by the ranges' rule ("flat up to a wall") the side was
+    stated open and Mp "no bound within the ranges" (the next-test benchmark's reference
+    test for this truth)."""
+    import pandas as pd
+
+    truth = {"ecoat_gpa": 1.0, "scoat_gpa": 0.4, "tcoat_mm": 0.012}
+    case = _set("nt2", truth, {}, [], BASE_TESTS, 0.05, 502)
+    path = write_calibration_study(tmp_path, case, seed=0)
+    tests = [{"test_id": f"reference-{k}", "tension_n": 0.0} for k in (1, 2)]
+    added = synthetic_measurements(tests, coating=truth, noise_n=0.05, seed=921)
+    table = pd.read_csv(tmp_path / "tests.csv")
+    pd.concat([table, added], ignore_index=True).to_csv(tmp_path / "tests.csv", index=False)
+    result = surrogate.calibrate(path, progress=False, record=False)
+    assert result.status == "converged", result.message
+    entry = result.determination["combinations"]["plastic_moment_n"]
+    assert entry["low"] is not None and entry["kind"] == "lower-bound", result.message
+    assert entry["low"] <= coat_section(truth, 1.2)[1], entry

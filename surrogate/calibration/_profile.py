@@ -90,6 +90,13 @@ FLAT = 0.1  # ρ under this where a side the linearisation is blind to starts: i
 RANGED = 0.25  # ρ under this up to where a range holds the step over: the ranges end the side
 # (FLAT before: a side whose every re-fit had Ecoat held at its bound paid ρ 0.107 all along,
 # the curves blind to Mp — ended on one machine, open on another)
+# sides the curves see at every coat: D's (the elastic rise) and Mp's lower one (a coat of a
+# smaller plastic moment yields sooner) — the ranges never end them; a steep rise there is
+# the curves' (a 5 mm test's coat: ρ 0.22 at −5.1 % in Mp, 12.9 at −5.6 %, a range holding
+# both, had been stated "no bound on Mp within the ranges")
+ALWAYS_SEEN = frozenset(
+    {("bending_stiffness_nmm", -1.0), ("bending_stiffness_nmm", 1.0), ("plastic_moment_n", -1.0)}
+)
 FLAT_RISE = 1.25  # …or ρ risen no more than this from half the way out (a quadratic rise: 4 ×)
 RISEN = 0.25  # an unchecked side's end stands where its re-fits rose at least this share of a
 # quadratic rise to it (√ρ half as fast): else nothing the profile saw bounds it there
@@ -371,7 +378,8 @@ class Profiler:
                 over = found
             if over is not None:
                 width = over.size - under.size
-                if _ranged(under, over, unders) and width <= OPEN_PRECISION * span:
+                rangeable = (quantity.name, sign) not in ALWAYS_SEEN
+                if rangeable and _ranged(under, over, unders) and width <= OPEN_PRECISION * span:
                     return ProfileSide(None, "profile", under.ratio, step, under.point(self))
                 if width <= END_PRECISION * over.size:
                     pending, size = (over, "profile"), min(far, CONFIRM * over.size)
@@ -423,7 +431,7 @@ class Profiler:
         holds the one over (a parameter at a bound the optimum was not at, :func:`_ranged`):
         there the ranges end it, not the curves (Tcoat along the valley of equally good
         coats, until Ecoat reaches its bound)."""
-        if _ranged(under, over, earlier):
+        if (quantity.name, sign) not in ALWAYS_SEEN and _ranged(under, over, earlier):
             return ProfileSide(None, "profile", under.ratio, steps, under.point(self))
         return self._ended(quantity, q0, sign, over, steps)
 
