@@ -17,13 +17,22 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 from scipy import stats
 
 import surrogate
 from surrogate.calibration._calibrate import run_calibration
 from surrogate.calibration._problem import coat_section
-from surrogate.calibration._profile import Profile, ProfileSide, Quantity, projected
+from surrogate.calibration._profile import (
+    Profile,
+    ProfileSide,
+    Quantity,
+    _leap,
+    _ranged,
+    _Step,
+    projected,
+)
 from surrogate.calibration._synthetic import (
     BASE_TESTS,
     _set,
@@ -137,17 +146,18 @@ def test_a_side_near_the_threshold_is_judged_on_a_settled_refit(tmp_path):
     assert entry["kind"] == "two-sided" and entry["low"] <= truth <= entry["high"], entry
 
 
-def _side(end, method="profile"):
-    return ProfileSide(end, method, 0.5, 3, None)
+def _side(end, method="profile", point=None):
+    return ProfileSide(end, method, 0.5, 3, point)
 
 
 def test_ecoat_is_projected_from_the_bending_stiffness_and_tcoat():
     """Ecoat = D / d(Tcoat) over the box of the two intervals: least at D's lower end and
-    Tcoat's upper one; a side open where the side it comes from is open (the ranges, not
-    the curves, end it there), or where it reaches Ecoat's range; unchecked where one it
-    comes from is. Against the closed form of the coat's section."""
-    thickness = 1.2
-    per_gpa = lambda t: bending_stiffness(1000.0, t, thickness)  # noqa: E731
+    Tcoat's upper one; a side open where Tcoat's side is open over a flat stretch (the
+    ranges, not the curves, end it), or where it reaches Ecoat's range — but closed at the
+    box's corner where the optimum's Tcoat is at its bound already; unchecked where a side
+    it comes from is; a point only where Tcoat's open side gives one. Against the closed
+    form of the coat's section."""
+    per_gpa = lambda t: bending_stiffness(1000.0, t, 1.2)  # noqa: E731
     ecoat = Quantity("ecoat_gpa", lambda theta: float(theta[0]), True, 0.5, 4.0)
     d = Profile("bending_stiffness_nmm", 10.0, _side(9.99), _side(10.01, "linear"))
     t = Profile("tcoat_mm", 0.02, _side(0.018), _side(0.022, "unchecked"))
@@ -157,17 +167,76 @@ def test_ecoat_is_projected_from_the_bending_stiffness_and_tcoat():
     assert found.upper.end == pytest.approx(10.01 / per_gpa(0.018), rel=1e-12)
     assert found.lower.end < value < found.upper.end and found.kind == "two-sided"
     assert found.lower.method == "unchecked" and found.upper.method == "profile"
-    # every coat of the box lies inside
-    for dd in (9.99, 10.0, 10.01):
+    assert found.lower.point is None and found.upper.point is None  # no re-fit of its own
+    for dd in (9.99, 10.0, 10.01):  # every coat of the box lies inside
         for tt in (0.018, 0.02, 0.022):
             assert found.lower.end <= dd / per_gpa(tt) * (1 + 1e-12)
             assert dd / per_gpa(tt) <= found.upper.end * (1 + 1e-12)
-    # Tcoat open above (its range ends it): Ecoat open below
-    t_open = Profile("tcoat_mm", 0.02, _side(0.018), _side(None))
-    assert projected(ecoat, value, d, t_open, per_gpa, (0.01, 0.1)).kind == "upper-bound"
+    # Tcoat open above over a flat stretch: Ecoat open below, with Tcoat's re-fit there
+    refit = np.array([1.0, 2.0, 3.0])
+    t_open = Profile("tcoat_mm", 0.02, _side(0.018), _side(None, point=refit))
+    open_below = projected(ecoat, value, d, t_open, per_gpa, (0.01, 0.1))
+    assert open_below.kind == "upper-bound" and open_below.lower.point is refit
+    # the optimum's Tcoat at its upper bound already: the corner there ends Ecoat's side
+    at_bound = Profile("tcoat_mm", 0.1, _side(0.09), _side(None))
+    value = 10.0 / per_gpa(0.1)
+    cornered = projected(ecoat, value, d, at_bound, per_gpa, (0.01, 0.1))
+    assert cornered.lower.end == pytest.approx(9.99 / per_gpa(0.1), rel=1e-12)
     # a thin coat at Tcoat's lower end would need Ecoat beyond its range: open above
     t_thin = Profile("tcoat_mm", 0.02, _side(0.0021), _side(0.022))
+    value = 10.0 / per_gpa(0.02)
     assert projected(ecoat, value, d, t_thin, per_gpa, (0.001, 0.1)).upper.end is None
+
+
+def test_the_projected_moduli_are_the_sections_over_their_functions_of_tcoat():
+    """``PROJECTED`` pairs each modulus with its section and the per-GPa function of the fit
+    coordinates that makes it: Ecoat = D / d(Tcoat), Scoat = Mp / m(Tcoat), exactly (a swap
+    of the two functions would pass every other fast test)."""
+    from surrogate.calibration._local import FitCoordinates
+    from surrogate.calibration._profile import PROJECTED
+    from surrogate.study._space import PAPER_SPACE
+
+    coordinates = FitCoordinates(PAPER_SPACE, 1.2)
+    coat = {"ecoat_gpa": 1.3, "scoat_gpa": 0.27, "tcoat_mm": 0.031}
+    d, mp = coat_section(coat, 1.2)
+    sections = {"bending_stiffness_nmm": d, "plastic_moment_n": mp}
+    assert {m for m, _, _ in PROJECTED} == {"ecoat_gpa", "scoat_gpa"}
+    for modulus, section, function in PROJECTED:
+        per_gpa = getattr(coordinates, function)
+        assert sections[section] / per_gpa(coat["tcoat_mm"]) == pytest.approx(coat[modulus])
+
+
+def _step(size, ratio, held=False):
+    return _Step(size, ratio, np.zeros(3), np.zeros((2, 3)), held)
+
+
+def test_the_ranges_end_a_side_only_after_a_flat_stretch_and_never_the_sections_seen_sides():
+    mp = Quantity("plastic_moment_n", lambda theta: 1.0, True, 0.1, 10.0)
+    tcoat = Quantity("tcoat_mm", lambda theta: 1.0, True, 0.01, 0.1)
+    flat = [_step(0.2, 0.107), _step(0.6, 0.107)]
+    wall = _step(0.9, 3.5e3, held=True)
+    assert _ranged(mp, 1.0, flat[1], wall, flat)  # Mp up, flat to Ecoat's bound: ranges
+    assert _ranged(tcoat, -1.0, flat[1], wall, flat)
+    assert not _ranged(mp, -1.0, flat[1], wall, flat)  # Mp down: the curves, always
+    assert not _ranged(mp, 1.0, flat[1], _step(0.9, 3.5e3), flat)  # no range holds it
+    rising = [_step(0.2, 0.31), _step(0.4, 0.73)]  # cover-011: a rise the curves make
+    assert not _ranged(tcoat, 1.0, rising[1], _step(0.6, 4.1, held=True), rising)
+    optimum = _step(0.0, 0.0)  # a flat optimum and a held first step: no stretch
+    assert not _ranged(tcoat, 1.0, optimum, _step(0.3, 7e5, held=True), [])
+
+
+def test_a_leap_needs_a_flat_stretch_of_the_sides_own_refits():
+    """cover-005's k_s: ρ 0.18 at every step, then 523 a step beyond (no range holding it):
+    a leap; but not from the optimum alone, nor from a point another profile found, nor
+    after a rise the curves make, nor where a range holds it."""
+    stretch = [_step(0.01, 0.18), _step(0.0235, 0.18), _step(0.0431, 0.18)]
+    assert _leap(_step(0.0488, 523.0), stretch[-1], stretch)
+    assert not _leap(_step(0.0488, 523.0, held=True), stretch[-1], stretch)
+    assert not _leap(_step(0.0488, 20.0), stretch[-1], stretch)  # not far over: judged as is
+    assert not _leap(_step(0.01, 523.0), _step(0.0, 0.0), [])  # from the optimum
+    assert not _leap(_step(0.0488, 523.0), _step(0.0431, 0.18), stretch)  # another's point
+    rising = [_step(0.02, 0.2), _step(0.04, 0.7)]
+    assert not _leap(_step(0.05, 523.0), rising[-1], rising)
 
 
 @pytest.mark.slow

@@ -534,8 +534,8 @@ def _checked_statement(
     if any(c["method"] == "unchecked" for c in (*combinations.values(), *intervals.values())):
         text += (
             "; some ends were not checked (the profiles' budget was spent, or a re-fit could "
-            "not reach them): linear there, open where the linear interval has no end or the "
-            "re-fits found the misfit flat towards it"
+            "not reach them or follow a trade of parameters): linear there, open where the "
+            "linear interval has no end or the re-fits found the misfit flat towards it"
         )
     for name in linear.held_at_bound:
         k = list(names).index(name)

@@ -312,8 +312,8 @@ def profiled_quantities(problem: CalibrationProblem) -> list[Quantity]:
                 ]
 
             found.append(Quantity(key, section, True, float(np.exp(low)), float(np.exp(high))))
-    # Tcoat first of the parameters: its profile walks the valley of equally good coats,
-    # whose ends start Ecoat's and Scoat's (every point under the threshold is in the region)
+    # Tcoat first of the parameters: its profile walks the valley of equally good coats, and
+    # with D's and Mp's gives Ecoat's and Scoat's (projected: :func:`._profile.projected`)
     order = sorted(range(len(space)), key=lambda k: names[k] != "tcoat_mm")
     for k in order:
         spec = space.parameters[k]

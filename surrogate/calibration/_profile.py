@@ -170,9 +170,11 @@ class ProfileSide:
     units), None where the side is *open* (its range end fits under the threshold;
     ``point`` is then the re-fit at that end); ``method`` ``linear`` where the linear
     interval's end was checked and stands, ``profile`` where the re-fits placed it,
-    ``unchecked`` where the budget stopped the profile before it did, or a re-fit
-    could not reach its target (the linear end then stands, unchecked; open where there is
-    none); ``ratio`` is ``ΔRSS/Δ`` at ``point``; ``steps`` the
+    ``unchecked`` where the budget stopped the profile before it did, a re-fit could not
+    reach its target, or a parameter's re-fit leapt over the threshold beyond a flat stretch
+    (:func:`_leap`) — the linear end (or the nearest step over) then stands, unchecked, where
+    the re-fits rose towards it; open where they found the misfit flat, or there is none;
+    ``ratio`` is ``ΔRSS/Δ`` at ``point``; ``steps`` the
     re-fits made; ``point`` the parameters of the last re-fit (an alternative fit the
     data hardly tell from the optimum: what a next test should separate)."""
 
@@ -337,20 +339,9 @@ class Profiler:
                 polishes = polishes + 1 if polished is not found else POLISHES
                 found = polished
                 self._log(quantity, sign, step, size, far, found)
-            if (
-                quantity.name in self.model.problem.space.names
-                and found.ratio > FAR_OVER
-                and not found.held
-                and found.size > under.size
-                and _flat(under, unders)
-            ):
-                # a parameter's side: beyond a flat stretch, a leap far over the threshold
-                # where no range holds the re-fit is one that cannot follow the trade of
-                # parameters (cover-005's k_s: ρ 523 at −0.049, ρ 0.18 at every step up to
-                # −0.043; the truth, −0.055, fits at 0.59; a fresh Jacobian brought it no
-                # lower): not checked beyond. Not D's or Mp's: there a leap is the physics
-                # (a plastic moment low enough to yield within the test, where none did)
-                return self._unfinished(quantity, q0, sign, linear_end, under, None, step)
+            parameter = quantity.name in self.model.problem.space.names
+            if parameter and pending is None and _leap(found, under, unders):
+                return self._unfinished(quantity, q0, sign, linear_end, under, over, step)
             if found.ratio <= AGREES[1] and found.size <= min(under.size, (1 - OPEN_UNIT) * size):
                 # the re-fit fell back short of its target, under the threshold: it did not
                 # reach the constraint, and says nothing of the side there
@@ -378,8 +369,7 @@ class Profiler:
                 over = found
             if over is not None:
                 width = over.size - under.size
-                rangeable = (quantity.name, sign) not in ALWAYS_SEEN
-                if rangeable and _ranged(under, over, unders) and width <= OPEN_PRECISION * span:
+                if _ranged(quantity, sign, under, over, unders) and width <= OPEN_PRECISION * span:
                     return ProfileSide(None, "profile", under.ratio, step, under.point(self))
                 if width <= END_PRECISION * over.size:
                     pending, size = (over, "profile"), min(far, CONFIRM * over.size)
@@ -410,7 +400,9 @@ class Profiler:
         the re-fit's ``ρ`` is at most what its nuisance parameters allow, never less, so
         only the outward move is safe)."""
         if how == "linear" and LINEAR_HOLDS[0] <= end.ratio <= LINEAR_HOLDS[1]:
-            return ProfileSide(linear_end, "linear", end.ratio, steps, end.point(self))
+            assert linear_end is not None  # a first step at the linear end
+            value = end_value(quantity, q0, sign, abs(quantity.scale(linear_end) - q0))
+            return ProfileSide(value, "linear", end.ratio, steps, end.point(self))
         size = end.size / math.sqrt(end.ratio) if 0.0 < end.ratio < 1.0 else end.size
         far = abs(quantity.range_scaled[1 if sign > 0 else 0] - q0)
         value = end_value(quantity, q0, sign, min(size, far))
@@ -431,7 +423,7 @@ class Profiler:
         holds the one over (a parameter at a bound the optimum was not at, :func:`_ranged`):
         there the ranges end it, not the curves (Tcoat along the valley of equally good
         coats, until Ecoat reaches its bound)."""
-        if (quantity.name, sign) not in ALWAYS_SEEN and _ranged(under, over, earlier):
+        if _ranged(quantity, sign, under, over, earlier):
             return ProfileSide(None, "profile", under.ratio, steps, under.point(self))
         return self._ended(quantity, q0, sign, over, steps)
 
@@ -464,7 +456,7 @@ class Profiler:
         if over is not None:
             end = end_value(quantity, q0, sign, over.size)
         elif linear_end is not None and abs(quantity.scale(linear_end) - q0) > under.size:
-            end = linear_end
+            end = end_value(quantity, q0, sign, abs(quantity.scale(linear_end) - q0))
         if end is not None and under.size > 0.0:
             size = abs(quantity.scale(end) - q0)
             if under.ratio < RISEN * (under.size / size) ** 2:
@@ -718,17 +710,41 @@ def quantity_gradient(model: Any, quantity: Quantity, x: np.ndarray) -> np.ndarr
     return gradient
 
 
-def _ranged(under: _Step, over: _Step, earlier: Sequence[_Step] = ()) -> bool:
-    """Whether the ranges, not the curves, end a side: the misfit flat along it
-    (:func:`_flat`) at least as far as the rest of the bracket, up to a step over the
-    threshold that a range holds. A flat optimum and a held first step are no such
-    stretch: cover-037's plastic moment, ρ 7·10⁵ at −19 % with Scoat at its bound, had been
-    stated free in its range; nor a rise the curves make: the plastic moment of a coat a
-    5 mm test barely yields, ρ 0.42 at −0.55 % and 9.2 at −0.77 % (a range holding both),
-    is bounded by the curves."""
-    if not (over.held and under.size >= over.size - under.size):
+def _ranged(
+    quantity: Quantity, sign: float, under: _Step, over: _Step, earlier: Sequence[_Step] = ()
+) -> bool:
+    """Whether the ranges, not the curves, end a side: the misfit flat along a stretch of
+    the side (:func:`_flat`, :func:`_stretch`) up to a step over the threshold that a range
+    holds — never on a side the curves see at every coat (``ALWAYS_SEEN``). A flat optimum
+    and a held first step are no such stretch: cover-037's plastic moment, ρ 7·10⁵ at −19 %
+    with Scoat at its bound, had been stated free in its range; nor a rise the curves make:
+    the plastic moment of a coat a 5 mm test barely yields, ρ 0.22 at −5.1 % and 12.9 at
+    −5.6 % (a range holding both), is bounded by the curves."""
+    if (quantity.name, sign) in ALWAYS_SEEN or not over.held:
         return False
-    return _flat(under, earlier)
+    return _stretch(under, over) and _flat(under, earlier)
+
+
+def _stretch(under: _Step, beyond: _Step) -> bool:
+    """Whether the re-fits under the threshold reach at least as far out as the step
+    ``beyond`` lies past them: a flat optimum alone is no stretch."""
+    return under.size > 0.0 and under.size >= beyond.size - under.size
+
+
+def _leap(found: _Step, under: _Step, earlier: Sequence[_Step]) -> bool:
+    """Whether ``found`` leaps far over the threshold (ρ > ``FAR_OVER``) where no range holds
+    it, beyond a flat stretch of the side's own re-fits: a re-fit that cannot follow a trade
+    of parameters (cover-005's k_s: ρ 523 at −0.049, ρ 0.18 at every step up to −0.043; the
+    truth, −0.055, fits at 0.59; a fresh Jacobian brought it no lower) — a parameter's side
+    is not checked beyond it. Not D's or Mp's: there a leap is the physics (a plastic moment
+    low enough to yield within the test, where none did)."""
+    return (
+        found.ratio > FAR_OVER
+        and not found.held
+        and any(e is under for e in earlier)  # the side's own: not a point found elsewhere
+        and _stretch(under, found)
+        and _flat(under, earlier)
+    )
 
 
 def _flat(under: _Step, earlier: Sequence[_Step]) -> bool:
@@ -739,7 +755,7 @@ def _flat(under: _Step, earlier: Sequence[_Step]) -> bool:
     test barely yields, then 4.6·10⁴ where Ecoat reached its bound). Beyond such a
     stretch, a step over the threshold that a range holds is the range's wall
     (:func:`_ranged`), and a parameter's leap far over it where none does is a re-fit that
-    cannot follow the trade of parameters (:meth:`Profiler._side`)."""
+    cannot follow the trade of parameters (:func:`_leap`)."""
     if under.ratio < RANGED:
         return True
     return under.ratio < AGREES[0] and any(
@@ -817,29 +833,38 @@ def projected(
     section's lower end and Tcoat's upper one, its largest at the other two. The 95 %
     region lies inside that box, so the interval holds every coat the region holds — no
     narrower than the modulus's own profile, and no run (the two profiles were a third of
-    every calibration's profile runs, 2,620 of 8,772 on 80 coverage sets). A side is open
-    where a side it comes from is (the curves do not bound it: the ranges do) or where it
-    reaches the modulus's range; ``unchecked`` where one it comes from is; its point the
-    Tcoat side's re-fit (the coat at that end of the valley of equally good coats)."""
+    every calibration's profile runs, 2,620 of 8,772 on 80 coverage sets).
+
+    A side is open where the section's side is, where it reaches the modulus's range, or
+    where Tcoat's side is open because the misfit was flat up to Tcoat's range (the ranges,
+    not the curves, end it there) — not where the optimum's Tcoat is at that end already:
+    there the box's corner at Tcoat's bound is the end, as a walk would find it. Its
+    ``point`` and ``ratio`` are Tcoat's side's where it is open because that side is (the
+    coat at that end of the valley of equally good coats: what a next test would separate),
+    else None: a closed end here is no re-fit of its own, to verify or to separate.
+    ``unchecked`` where a side it comes from is."""
+    span = abs(math.log(tcoat_range[1] / tcoat_range[0]))
     sides = []
     for lower in (True, False):
         section_side = section.lower if lower else section.upper
         tcoat_side = tcoat.upper if lower else tcoat.lower
+        bound = tcoat_range[1] if lower else tcoat_range[0]  # Tcoat's range end on that side
+        at_bound = abs(math.log(tcoat.value / bound)) <= PIN_UNIT * span
         end: float | None = None
-        if section_side.end is not None:
-            thickness = tcoat_side.end
-            if thickness is None:  # open: Tcoat reaches its range's end
-                thickness = tcoat_range[1] if lower else tcoat_range[0]
-            end = section_side.end / per_gpa(thickness)
+        opened_by_tcoat = tcoat_side.end is None and not at_bound
+        if section_side.end is not None and not opened_by_tcoat:
+            thickness = bound if tcoat_side.end is None else tcoat_side.end
             q0 = quantity.scale(value)
-            size = (q0 - quantity.scale(end)) if lower else (quantity.scale(end) - q0)
+            reach = quantity.scale(section_side.end / per_gpa(thickness)) - q0
+            size = max(-reach if lower else reach, 0.0)
             far = abs(quantity.range_scaled[0 if lower else 1] - q0)  # to the range's end
-            end = end_value(quantity, q0, -1.0 if lower else 1.0, min(max(size, 0.0), far))
-            if tcoat_side.end is None:  # its range, not the curves, ends Tcoat there
-                end = None
+            end = end_value(quantity, q0, -1.0 if lower else 1.0, min(size, far))
         methods = {section_side.method, tcoat_side.method}
         method = "unchecked" if "unchecked" in methods else "profile"
-        sides.append(ProfileSide(end, method, tcoat_side.ratio, 0, tcoat_side.point))
+        if opened_by_tcoat:
+            sides.append(ProfileSide(None, method, tcoat_side.ratio, 0, tcoat_side.point))
+        else:
+            sides.append(ProfileSide(end, method, None, 0, None))
     return Profile(quantity.name, value, sides[0], sides[1])
 
 

@@ -2,9 +2,10 @@
 
 After a calibration (and, where there is one, a diagnosis) of the study's model:
 
-1. **Precision.** Each profile side of the calibration's intervals ended at a re-fit —
-   an alternative fit the measured curves hardly tell from the optimum (at the
-   threshold, or at the range's end of an open side). Each candidate test
+1. **Precision.** Each walked profile side of the calibration's intervals ended at a
+   re-fit — an alternative fit the measured curves hardly tell from the optimum (at the
+   threshold, or at the range's end of an open side); a projected side of Ecoat or Scoat
+   has Tcoat's re-fit where it is open because Tcoat's side is, else none. Each candidate test
    (:func:`~._candidates.candidate_tests`) is run at the optimum and at every
    alternative; what its replicates would add between them (:mod:`._information`)
    moves each side in: the predicted interval of every quantity, in its own units.

@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 
 import surrogate
+from surrogate.calibration._calibrate import run_calibration
 from surrogate.calibration._synthetic import (
     BASE_TESTS,
     HIDDEN_EFFECT_TESTS,
@@ -211,11 +212,15 @@ def test_a_test_the_other_parameters_absorb_is_not_said_to_settle_a_free_paramet
     On the code before, it was predicted to settle Ecoat to ``≤ 0.5002`` (the truth 0.6):
     the alternative taken as it stood, and the test's sensitivities differenced across the
     valley of equally good coats. Measured at the truth, the test gives no such width: the
-    prediction promises no more than the test gives."""
+    prediction promises no more than the test gives. (Where along the valley the global
+    phase ends is a surrogate fit's last bits: the local phase starts at Ecoat's bound.)"""
     truth = {"ecoat_gpa": 0.6, "scoat_gpa": 0.35, "tcoat_mm": 0.02}
     path = write_calibration_study(tmp_path, _set("held", truth, {}, [], BASE_TESTS, 0.05, 501))
     path.write_text(path.read_text() + DESIGN)
-    assert surrogate.calibrate(path, progress=False).status == "converged"
+    tcoat = truth["ecoat_gpa"] * truth["tcoat_mm"] / 0.5  # D kept: Ecoat·Tcoat
+    start = {"ecoat_gpa": 0.5, "tcoat_mm": tcoat, "scoat_gpa": 0.35 * 0.02 * 1.18 / tcoat / 1.176}
+    held, _ = run_calibration(path, progress=False, start=start)
+    assert held.status == "converged" and held.params["ecoat_gpa"] == pytest.approx(0.5)
     result = surrogate.next_test(path, count=16, plots=False, progress=False)
     short = [r for r in result.recommended if r["conditions"]["bending_length_mm"] == 5.0]
     assert short, result.recommended
