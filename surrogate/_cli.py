@@ -24,7 +24,7 @@ from typing import Any, NoReturn
 
 from ._errors import InputDataError, InputDataWarning, Interrupted, SolverError
 from ._io import atomic_write_text
-from ._log import show_progress
+from ._log import drop_ctrl_c_echoes, show_progress
 from .solvers import available_solvers
 from .solvers._simulate import BendingCurve, simulate
 from .study._rig import Rig
@@ -1074,6 +1074,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = _build_parser()
     args = parser.parse_args(argv)
     show_progress()
+    drop_ctrl_c_echoes()
     sys.unraisablehook = _ctrl_c_again
     try:
         with _data_warnings_in_one_line():

@@ -415,6 +415,62 @@ def test_ctrl_c_stops_a_run_with_one_line(study_file, tmp_path):
     assert "Traceback" not in stderr
 
 
+_INTERRUPTED_QUERY = """
+import logging, sqlite3, sys
+import sqlalchemy
+from surrogate._log import drop_ctrl_c_echoes
+
+class Interrupted(sqlite3.Cursor):
+    def fetchall(self):
+        raise KeyboardInterrupt  # the SIGINT, inside the database's fetch
+
+class Connection(sqlite3.Connection):
+    def cursor(self, factory=Interrupted):
+        return super().cursor(factory)
+
+if sys.argv[1:] == ["cli"]:
+    drop_ctrl_c_echoes()
+engine = sqlalchemy.create_engine(
+    "sqlite://", creator=lambda: sqlite3.connect(":memory:", factory=Connection)
+)
+try:
+    with engine.connect() as connection:
+        result = connection.execute(sqlalchemy.text("SELECT 1"))
+        try:
+            result.fetchall()
+        finally:
+            result.close()
+except KeyboardInterrupt:
+    print("surrogate: interrupted (Ctrl-C)", file=sys.stderr)
+logging.getLogger("sqlalchemy.pool").error("another error of SQLAlchemy's")
+"""
+
+
+def test_a_ctrl_c_inside_a_query_is_not_echoed_by_sqlalchemy():
+    """The Ctrl-C test above failed once with three pytest processes on two cores: the
+    SIGINT came inside SQLAlchemy's fetch of a SQLite query; SQLAlchemy closed the
+    connection, then could not close the cursor, and logged "Error closing cursor" with
+    two tracebacks above the command's one line. Here a real SQLAlchemy engine's cursor
+    raises KeyboardInterrupt in its fetch: without the command's logging the echo is
+    there (the same text as that failure), with it (:func:`surrogate._log.drop_ctrl_c_echoes`,
+    which ``main`` calls) only the one line is, and any other error of SQLAlchemy's still
+    reaches stderr."""
+
+    def stderr(*args):
+        done = subprocess.run(
+            [sys.executable, "-c", _INTERRUPTED_QUERY, *args],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert done.returncode == 0, done.stderr
+        return done.stderr
+
+    bare = stderr()
+    assert "Error closing cursor" in bare and "Cannot operate on a closed database" in bare
+    assert stderr("cli") == ("surrogate: interrupted (Ctrl-C)\nanother error of SQLAlchemy's\n")
+
+
 def test_a_worker_started_ignoring_sigint_ignores_it(study_file, tmp_path):
     """A process started with SIGINT ignored (a shell script's background job: a Ctrl-C
     there is meant for the script's foreground) keeps it ignored in its worker loop too:
