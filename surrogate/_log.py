@@ -16,7 +16,6 @@ __all__ = ["LOGGER_NAME", "drop_ctrl_c_echoes", "show_progress"]
 
 LOGGER_NAME = "surrogate"
 _HANDLER_NAME = "surrogate-progress"
-_ECHOES_NAME = "surrogate-no-ctrl-c-echoes"
 
 
 def show_progress() -> None:
@@ -36,36 +35,24 @@ def show_progress() -> None:
 
 
 def drop_ctrl_c_echoes() -> None:
-    """For a command: a log record of the database library's (SQLAlchemy's) whose exception
-    a Ctrl-C set off is dropped; every other goes where it went, to Python's last-resort
-    handler (stderr, WARNING and up). A Ctrl-C during a query makes SQLAlchemy close the
-    connection, then fail to close its cursor, and log "Error closing cursor" with two
-    tracebacks — above the one line the command prints (``surrogate run``'s Ctrl-C test,
-    three pytest processes on two cores). Idempotent; nothing where the application
-    configured logging."""
-    logger = logging.getLogger("sqlalchemy")
-    if any(h.get_name() == _ECHOES_NAME for h in logger.handlers):
-        return
-    if logger.handlers or logging.getLogger().handlers:
-        return  # the application decides where logging goes
-    handler = _LastResortUnlessCtrlC()
-    handler.set_name(_ECHOES_NAME)
-    logger.addHandler(handler)
+    """For a command: Python's last-resort output (stderr, where nothing configured logging)
+    leaves out SQLAlchemy's records that a Ctrl-C set off — after a SIGINT inside a query it
+    logs "Error closing cursor" with two tracebacks above the command's one line. Every other
+    record goes where it went. Idempotent."""
+    if logging.lastResort is not None and _not_ctrl_c not in logging.lastResort.filters:
+        logging.lastResort.addFilter(_not_ctrl_c)
 
 
-class _LastResortUnlessCtrlC(logging.Handler):
-    """:data:`logging.lastResort`, for the records no Ctrl-C set off."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        error = record.exc_info[1] if record.exc_info else None
-        seen: set[int] = set()
-        while error is not None and id(error) not in seen:
-            if isinstance(error, KeyboardInterrupt):
-                return False
-            seen.add(id(error))
-            error = error.__cause__ or error.__context__
-        return bool(super().filter(record))
-
-    def emit(self, record: logging.LogRecord) -> None:
-        if logging.lastResort is not None:
-            logging.lastResort.handle(record)
+def _not_ctrl_c(record: logging.LogRecord) -> bool:
+    """False for a record of SQLAlchemy's whose exception a KeyboardInterrupt set off
+    (anywhere in its chain, a context suppressed with ``from None`` too)."""
+    if not record.name.startswith("sqlalchemy"):
+        return True
+    error = record.exc_info[1] if record.exc_info else None
+    seen: set[int] = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, KeyboardInterrupt):
+            return False
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return True

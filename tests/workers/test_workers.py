@@ -418,7 +418,7 @@ def test_ctrl_c_stops_a_run_with_one_line(study_file, tmp_path):
 _INTERRUPTED_QUERY = """
 import logging, sqlite3, sys
 import sqlalchemy
-from surrogate._log import drop_ctrl_c_echoes
+from surrogate._cli import main
 
 class Interrupted(sqlite3.Cursor):
     def fetchall(self):
@@ -428,8 +428,8 @@ class Connection(sqlite3.Connection):
     def cursor(self, factory=Interrupted):
         return super().cursor(factory)
 
-if sys.argv[1:] == ["cli"]:
-    drop_ctrl_c_echoes()
+if sys.argv[1:] == ["cli"]:  # a command ran first in this process: its logging stays
+    main(["simulate", "--ecoat", "1", "--scoat", "0.2", "--tcoat", "0.012"])
 engine = sqlalchemy.create_engine(
     "sqlite://", creator=lambda: sqlite3.connect(":memory:", factory=Connection)
 )
@@ -443,18 +443,16 @@ try:
 except KeyboardInterrupt:
     print("surrogate: interrupted (Ctrl-C)", file=sys.stderr)
 logging.getLogger("sqlalchemy.pool").error("another error of SQLAlchemy's")
+logging.getLogger("sqlalchemy.engine").setLevel(logging.INFO)
+logging.getLogger("sqlalchemy.engine").info("a statement: below the last resort's WARNING")
 """
 
 
 def test_a_ctrl_c_inside_a_query_is_not_echoed_by_sqlalchemy():
-    """The Ctrl-C test above failed once with three pytest processes on two cores: the
-    SIGINT came inside SQLAlchemy's fetch of a SQLite query; SQLAlchemy closed the
-    connection, then could not close the cursor, and logged "Error closing cursor" with
-    two tracebacks above the command's one line. Here a real SQLAlchemy engine's cursor
-    raises KeyboardInterrupt in its fetch: without the command's logging the echo is
-    there (the same text as that failure), with it (:func:`surrogate._log.drop_ctrl_c_echoes`,
-    which ``main`` calls) only the one line is, and any other error of SQLAlchemy's still
-    reaches stderr."""
+    """A real SQLAlchemy engine whose cursor raises KeyboardInterrupt in its fetch logs "Error
+    closing cursor" with two tracebacks (the Ctrl-C test above failed so once, with three
+    pytest processes on two cores); after a command's ``main`` only the command's line and
+    SQLAlchemy's other records reach stderr (:func:`surrogate._log.drop_ctrl_c_echoes`)."""
 
     def stderr(*args):
         done = subprocess.run(
