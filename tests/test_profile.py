@@ -41,6 +41,7 @@ from surrogate.calibration._synthetic import (
     write_calibration_study,
 )
 from surrogate.physics import bending_stiffness
+from surrogate.study._space import ParameterSpec
 
 SETS = {count: {case["name"]: case for case in coverage_sets(count)} for count in (120, 240)}
 DEEP = 0.6  # the truth's misfit above the fit's, at most (a share of the threshold)
@@ -150,6 +151,10 @@ def _side(end, method="profile", point=None):
     return ProfileSide(end, method, 0.5, 3, point)
 
 
+TCOAT = ParameterSpec("tcoat_mm", 0.01, 0.1, log=True)
+THIN_TCOAT = ParameterSpec("tcoat_mm", 0.001, 0.1, log=True)
+
+
 def test_ecoat_is_projected_from_the_bending_stiffness_and_tcoat():
     """Ecoat = D / d(Tcoat) over the box of the two intervals: least at D's lower end and
     Tcoat's upper one; a side open where Tcoat's side is open over a flat stretch (the
@@ -162,7 +167,7 @@ def test_ecoat_is_projected_from_the_bending_stiffness_and_tcoat():
     d = Profile("bending_stiffness_nmm", 10.0, _side(9.99), _side(10.01, "linear"))
     t = Profile("tcoat_mm", 0.02, _side(0.018), _side(0.022, "unchecked"))
     value = 10.0 / per_gpa(0.02)
-    found = projected(ecoat, value, d, t, per_gpa, (0.01, 0.1))
+    found = projected(ecoat, value, d, t, per_gpa, TCOAT)
     assert found.lower.end == pytest.approx(9.99 / per_gpa(0.022), rel=1e-12)
     assert found.upper.end == pytest.approx(10.01 / per_gpa(0.018), rel=1e-12)
     assert found.lower.end < value < found.upper.end and found.kind == "two-sided"
@@ -175,17 +180,17 @@ def test_ecoat_is_projected_from_the_bending_stiffness_and_tcoat():
     # Tcoat open above over a flat stretch: Ecoat open below, with Tcoat's re-fit there
     refit = np.array([1.0, 2.0, 3.0])
     t_open = Profile("tcoat_mm", 0.02, _side(0.018), _side(None, point=refit))
-    open_below = projected(ecoat, value, d, t_open, per_gpa, (0.01, 0.1))
+    open_below = projected(ecoat, value, d, t_open, per_gpa, TCOAT)
     assert open_below.kind == "upper-bound" and open_below.lower.point is refit
     # the optimum's Tcoat at its upper bound already: the corner there ends Ecoat's side
     at_bound = Profile("tcoat_mm", 0.1, _side(0.09), _side(None))
     value = 10.0 / per_gpa(0.1)
-    cornered = projected(ecoat, value, d, at_bound, per_gpa, (0.01, 0.1))
+    cornered = projected(ecoat, value, d, at_bound, per_gpa, TCOAT)
     assert cornered.lower.end == pytest.approx(9.99 / per_gpa(0.1), rel=1e-12)
     # a thin coat at Tcoat's lower end would need Ecoat beyond its range: open above
     t_thin = Profile("tcoat_mm", 0.02, _side(0.0021), _side(0.022))
     value = 10.0 / per_gpa(0.02)
-    assert projected(ecoat, value, d, t_thin, per_gpa, (0.001, 0.1)).upper.end is None
+    assert projected(ecoat, value, d, t_thin, per_gpa, THIN_TCOAT).upper.end is None
 
 
 def test_the_projected_moduli_are_the_sections_over_their_functions_of_tcoat():

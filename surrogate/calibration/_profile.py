@@ -64,6 +64,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import lsq_linear
 
+from ..study._space import ParameterSpec
 from ._determination import determination_threshold, interval_kind_of
 from ._local import BudgetSpent, LocalFit, ResidualModel, broyden_update
 
@@ -300,6 +301,7 @@ class Profiler:
         pending: tuple[_Step, str] | None = None  # an end, and how it was found, to confirm
         polishes = 0
         unders: list[_Step] = []  # this side's re-fits under the threshold
+        parameter = quantity.name in self.model.problem.space.names  # (not D's or Mp's)
         for step in range(1, MAX_STEPS + 1):
             try:  # from the farthest point under the threshold: a good fit, a good Jacobian
                 evaluations = (
@@ -339,7 +341,6 @@ class Profiler:
                 polishes = polishes + 1 if polished is not found else POLISHES
                 found = polished
                 self._log(quantity, sign, step, size, far, found)
-            parameter = quantity.name in self.model.problem.space.names
             if parameter and pending is None and _leap(found, under, unders):
                 return self._unfinished(quantity, q0, sign, linear_end, under, over, step)
             if found.ratio <= AGREES[1] and found.size <= min(under.size, (1 - OPEN_UNIT) * size):
@@ -825,7 +826,7 @@ def projected(
     section: Profile,
     tcoat: Profile,
     per_gpa: Callable[[float], float],
-    tcoat_range: tuple[float, float],
+    tcoat_spec: ParameterSpec,
 ) -> Profile:
     """Ecoat's (Scoat's) interval from the profiles of D (Mp) and Tcoat: the modulus is
     ``section / per_gpa(Tcoat)`` (the coat's section, exactly), rising with the section and
@@ -843,13 +844,13 @@ def projected(
     coat at that end of the valley of equally good coats: what a next test would separate),
     else None: a closed end here is no re-fit of its own, to verify or to separate.
     ``unchecked`` where a side it comes from is."""
-    span = abs(math.log(tcoat_range[1] / tcoat_range[0]))
+    unit = float(tcoat_spec.to_unit(np.array([tcoat.value]))[0])
     sides = []
     for lower in (True, False):
         section_side = section.lower if lower else section.upper
         tcoat_side = tcoat.upper if lower else tcoat.lower
-        bound = tcoat_range[1] if lower else tcoat_range[0]  # Tcoat's range end on that side
-        at_bound = abs(math.log(tcoat.value / bound)) <= PIN_UNIT * span
+        bound = tcoat_spec.high if lower else tcoat_spec.low  # Tcoat's range end on that side
+        at_bound = bool(_pinned(np.array([unit]))[0]) and (unit > 0.5) == lower
         end: float | None = None
         opened_by_tcoat = tcoat_side.end is None and not at_bound
         if section_side.end is not None and not opened_by_tcoat:
@@ -895,7 +896,6 @@ def profile(
         if quantity.name not in derived
     }
     theta = model.point(profiler.optimum.x)
-    tcoat_range = (coordinates.t.low, coordinates.t.high) if derived else (0.0, 0.0)
     for quantity, _ in quantities:
         if quantity.name in derived:
             section, per_gpa = derived[quantity.name]
@@ -905,6 +905,6 @@ def profile(
                 found[section],
                 found["tcoat_mm"],
                 per_gpa,
-                tcoat_range,
+                coordinates.t,
             )
     return [found[quantity.name] for quantity, _ in quantities], profiler.better
