@@ -88,10 +88,19 @@ class FitCoordinates:
     of the declared box; where ``D/d(Tcoat)`` leaves Ecoat's range Ecoat is held at
     its bound (likewise Scoat). Every other parameter keeps its unit coordinate.
     Identity where the space lacks a coating parameter.
+
+    ``declared``: the moduli (``ecoat_gpa``, ``scoat_gpa``) that keep their own unit
+    coordinate instead of their section's: where a modulus is held at its bound, the
+    section's coordinate has a kink there (below it, the modulus is held and ``D`` follows
+    Tcoat alone), and a Gauss–Newton step across it is no step of the model's (the
+    profiles: :func:`._profile.profile`).
     """
 
-    def __init__(self, space: Any, thickness_mm: float) -> None:
+    def __init__(
+        self, space: Any, thickness_mm: float, declared: frozenset[str] = frozenset()
+    ) -> None:
         self.space = space
+        self.declared = declared
         names = list(space.names)
         self.coating = all(n in names for n in COATING_PARAMETERS)
         if not self.coating:
@@ -110,10 +119,19 @@ class FitCoordinates:
         tcoat = float(self.t.from_unit(x[self.it]))
         return [
             (i, spec, float(np.exp(low + x[i] * (high - low)) / per_gpa(tcoat)))
-            for i, spec, per_gpa, (low, high) in (
+            for i, spec, per_gpa, (low, high) in self._sections()
+        ]
+
+    def _sections(self) -> list[tuple[int, Any, Callable[[float], float], np.ndarray]]:
+        """The moduli in their section's coordinate: (index, declared parameter, per-GPa
+        section, log range of the section) each."""
+        return [
+            (i, spec, per_gpa, log_range)
+            for i, spec, per_gpa, log_range in (
                 (self.ie, self.e, self.d_per_gpa, self.log_d),
                 (self.is_, self.s, self.m_per_gpa, self.log_m),
             )
+            if spec.name not in self.declared
         ]
 
     def to_unit(self, x: np.ndarray) -> np.ndarray:
@@ -148,10 +166,7 @@ class FitCoordinates:
         if not self.coating:
             return x
         tcoat = float(self.t.from_unit(unit[self.it]))
-        for i, spec, per_gpa, (low, high) in (
-            (self.ie, self.e, self.d_per_gpa, self.log_d),
-            (self.is_, self.s, self.m_per_gpa, self.log_m),
-        ):
+        for i, spec, per_gpa, (low, high) in self._sections():
             value = float(spec.from_unit(unit[i])) * per_gpa(tcoat)
             x[i] = (np.log(value) - low) / (high - low)
         return x
@@ -184,6 +199,19 @@ class ResidualModel:
         self._memo: dict[bytes, tuple[np.ndarray, np.ndarray | None]] = {}
         self._pinned: dict[bytes, np.ndarray] = {}
         self._failed_residual = np.full(problem.n_points, 1e3 * (1.0 + np.max(problem.measured_n)))
+
+    def declaring(self, declared: frozenset[str]) -> ResidualModel:
+        """The same residuals, runs and budget in coordinates where the moduli ``declared``
+        keep their own unit coordinate (:class:`FitCoordinates`); a run made for either is
+        made for both (the result cache), their points are their own."""
+        if declared == self.coordinates.declared:
+            return self
+        other = ResidualModel(self.problem, self.runs, budget=self.budget)
+        other.fd_step = self.fd_step
+        other.coordinates = FitCoordinates(
+            self.problem.space, self.problem.spec.rig.thickness_mm, declared
+        )
+        return other
 
     @staticmethod
     def _key(x: np.ndarray) -> bytes:
