@@ -292,3 +292,28 @@ def test_a_modulus_held_at_its_bound_does_not_close_the_plastic_moment(tmp_path,
     assert stiffness["low"] <= d <= stiffness["high"], (d, stiffness)
     assert moment["kind"] == "lower-bound", (moment, result.message)
     assert moment["low"] <= mp, (mp, moment)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_tcoats_walk_from_a_coat_held_at_its_bound_holds_the_truth(tmp_path, seed):
+    """cover-056 of 240 (the tension effect, one bending length; the truth's Tcoat 0.0111 mm)
+    on four study seeds; some end with Ecoat held at its lower bound and Tcoat 0.0346 mm, the
+    truth fitting as well. Tcoat's lower side walks the valley off Ecoat's bound, where the
+    Jacobian carried from the optimum is the held side's differences: on the code before,
+    its re-fits leapt to ρ 10⁵ and the side closed at 0.025 mm (study seed 0, OpenBLAS's
+    Haswell kernels), and a re-fit that fell back to the fit's own Tcoat over the threshold
+    made an "end" there and divided by its zero width (seed 1, the same kernels: the
+    calibration raised ZeroDivisionError). A re-fit that took a modulus off the bound
+    holding it at the optimum now takes a fresh Jacobian before it is judged; one that falls
+    back short of a point under the threshold leaves the side unchecked."""
+    case = SETS[240]["cover-056"]
+    path = write_calibration_study(tmp_path, case, seed=seed)
+    result = surrogate.calibrate(path, progress=False, record=False)
+    assert result.status == "converged", result.message
+    entries = result.determination["intervals"]
+    for quantity in ("ecoat_gpa", "scoat_gpa", "tcoat_mm"):
+        entry, value = entries[quantity], case["coating"][quantity]
+        low = -math.inf if entry["low"] is None else entry["low"]
+        high = math.inf if entry["high"] is None else entry["high"]
+        assert low <= value <= high, (quantity, value, entry, result.message)

@@ -134,6 +134,11 @@ class FitCoordinates:
             if spec.name not in self.declared
         ]
 
+    def sectioned(self) -> list[int]:
+        """The indices of the moduli in their section's coordinate (where a bound of theirs is
+        a kink)."""
+        return [i for i, _, _, _ in self._sections()] if self.coating else []
+
     def to_unit(self, x: np.ndarray) -> np.ndarray:
         """Unit coordinates of the declared space at fit coordinates ``x``."""
         unit = np.array(x, dtype=float)

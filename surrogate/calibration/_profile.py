@@ -116,7 +116,9 @@ MAX_STEPS = 8  # constrained re-fits of one side, at most
 POLISH_BELOW = 3.0  # a re-fit with ρ from AGREES[0] to this takes a fresh Jacobian and steps on
 POLISHES = 2  # …at most this many times a side, where it reached within this share of the
 POLISH_SHARE = 0.05  # quantity's range (a narrow statement: where an unsettled re-fit misleads)
-# — not the linear end's own check, which its confirmation tests
+# — not the linear end's own check, which its confirmation tests; and, anywhere, a re-fit
+# over the threshold that took a modulus off the bound holding it at the optimum
+# (:meth:`Profiler._unheld`)
 BETTER_CHI2 = 1.0  # a profile point this many s² below the optimum: another basin
 TRUST = 0.2  # a re-fit's Gauss–Newton step moves no coordinate farther than this
 DAMPING = 1e-8  # of ‖J‖²: the re-fit's Gauss–Newton steps, damped
@@ -346,8 +348,10 @@ class Profiler:
                 polishes < POLISHES
                 and pending is None
                 and not linear_check
-                and AGREES[0] <= found.ratio <= POLISH_BELOW
-                and found.size <= POLISH_SHARE * span
+                and (
+                    (AGREES[0] <= found.ratio <= POLISH_BELOW and found.size <= POLISH_SHARE * span)
+                    or (found.ratio > AGREES[1] and self._unheld(found.x))
+                )
             ):
                 try:  # a Jacobian the budget cannot finish is not begun: found stands
                     self.model.check_jacobian_fits(self.model.coordinates.to_unit(found.x))
@@ -360,9 +364,11 @@ class Profiler:
                 self._log(quantity, sign, step, size, far, found)
             if parameter and pending is None and _leap(found, under, unders):
                 return self._unfinished(quantity, q0, sign, linear_end, under, over, step)
-            if found.ratio <= AGREES[1] and found.size <= min(under.size, (1 - OPEN_UNIT) * size):
-                # the re-fit fell back short of its target, under the threshold: it did not
-                # reach the constraint, and says nothing of the side there
+            if found.size <= min(under.size, (1 - OPEN_UNIT) * size):
+                # the re-fit fell back short of its target, to where a point under the
+                # threshold lies: it did not reach the constraint, and says nothing of the side
+                # there (over the threshold too: cover-056 of 240, study seed 1, fell back to
+                # the optimum's Tcoat at ρ > 1, an "end" at the fit's own value)
                 return self._unfinished(quantity, q0, sign, linear_end, under, over, step + 1)
             if pending is not None:  # ``found`` is the step beyond an end: does it rise on?
                 end, how = pending
@@ -471,7 +477,7 @@ class Profiler:
         end that had not settled, ρ 2.6·10⁶, with ρ 4·10⁻⁴ at 0.25 and the truth, 0.213,
         fitting as well; the end is then a guess, and the side is stated open)."""
         end: float | None = None
-        if over is not None:
+        if over is not None and over.size > under.size:
             end = end_value(quantity, q0, sign, over.size)
         elif linear_end is not None and abs(quantity.scale(linear_end) - q0) > under.size:
             end = end_value(quantity, q0, sign, abs(quantity.scale(linear_end) - q0))
@@ -480,6 +486,17 @@ class Profiler:
             if under.ratio < RISEN * (under.size / size) ** 2:
                 end = None
         return ProfileSide(end, "unchecked", None, step - 1, under.point(self))
+
+    def _unheld(self, x: np.ndarray) -> bool:
+        """Whether ``x`` has a modulus off the bound that held it at the optimum (in the fit
+        coordinates, where that bound is a kink): the Jacobian a re-fit carries from there
+        is the held side's differences, no model of the side it moved to — a re-fit of
+        Tcoat from a coat held at Ecoat's bound leapt to ρ 10⁵ along the valley where a
+        fresh Jacobian finds ρ < 0 (cover-056 of 240, Haswell kernels)."""
+        coordinates = self.model.coordinates
+        moduli = coordinates.sectioned()
+        held = _pinned(coordinates.to_unit(self.optimum.x))[moduli]
+        return bool(np.any(held & ~_pinned(coordinates.to_unit(x))[moduli]))
 
     def _farthest_under(self, quantity: Quantity, q0: float, sign: float) -> _Step:
         """Of the optimum and every point the profiles found under the threshold, the one
