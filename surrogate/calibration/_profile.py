@@ -364,11 +364,14 @@ class Profiler:
                 self._log(quantity, sign, step, size, far, found)
             if parameter and pending is None and _leap(found, under, unders):
                 return self._unfinished(quantity, q0, sign, linear_end, under, over, step)
-            if found.size <= min(under.size, (1 - OPEN_UNIT) * size):
+            if found.size <= min(under.size, (1 - OPEN_UNIT) * size) and (
+                found.ratio <= AGREES[1] or pending is None
+            ):
                 # the re-fit fell back short of its target, to where a point under the
                 # threshold lies: it did not reach the constraint, and says nothing of the side
                 # there (over the threshold too: cover-056 of 240, study seed 1, fell back to
-                # the optimum's Tcoat at ρ > 1, an "end" at the fit's own value)
+                # the optimum's Tcoat at ρ > 1, an "end" at the fit's own value) — but a
+                # confirmation over the threshold confirms its end wherever it stopped
                 return self._unfinished(quantity, q0, sign, linear_end, under, over, step + 1)
             if pending is not None:  # ``found`` is the step beyond an end: does it rise on?
                 end, how = pending
@@ -942,8 +945,10 @@ def profile(
     )
     sections = profiler
     if held:
-        try:  # the optimum's Jacobian in those coordinates: a run a condition group each
-            sections = Profiler(model.declaring(held), fit)  # (known: :func:`_share`)
+        declared = model.declaring(held)
+        try:  # the optimum's Jacobian in those coordinates: a run a condition group each,
+            declared.check_jacobian_fits(unit)  # none begun where the budget cannot finish it
+            sections = Profiler(declared, fit)  # (known: :func:`_share`)
         except BudgetSpent:  # …that the budget refuses: the fit coordinates' kink stays
             pass
     names = {quantity.name for quantity, _ in quantities}
