@@ -195,12 +195,22 @@ class ResidualModel:
     budget : int, optional
         Most full-solver runs ``runs`` may have used; an evaluation that would
         exceed it raises :class:`BudgetSpent`.
+    declared : frozenset of str, optional
+        Moduli that keep their own unit coordinate (:class:`FitCoordinates`).
     """
 
-    def __init__(self, problem: Any, runs: Any, *, budget: int | None = None) -> None:
+    def __init__(
+        self,
+        problem: Any,
+        runs: Any,
+        *,
+        budget: int | None = None,
+        declared: frozenset[str] = frozenset(),
+    ) -> None:
         self.problem, self.runs, self.budget = problem, runs, budget
         self.fd_step = FD_STEP_UNIT
-        self.coordinates = FitCoordinates(problem.space, problem.spec.rig.thickness_mm)
+        thickness = problem.spec.rig.thickness_mm
+        self.coordinates = FitCoordinates(problem.space, thickness, declared)
         self._memo: dict[bytes, tuple[np.ndarray, np.ndarray | None]] = {}
         self._pinned: dict[bytes, np.ndarray] = {}
         self._failed_residual = np.full(problem.n_points, 1e3 * (1.0 + np.max(problem.measured_n)))
@@ -211,11 +221,8 @@ class ResidualModel:
         made for both (the result cache), their points are their own."""
         if declared == self.coordinates.declared:
             return self
-        other = ResidualModel(self.problem, self.runs, budget=self.budget)
+        other = ResidualModel(self.problem, self.runs, budget=self.budget, declared=declared)
         other.fd_step = self.fd_step
-        other.coordinates = FitCoordinates(
-            self.problem.space, self.problem.spec.rig.thickness_mm, declared
-        )
         return other
 
     @staticmethod

@@ -234,6 +234,7 @@ class _Optimum:
     jacobian: np.ndarray  # ∂r/∂x at x
     threshold: float  # Δ
     sigma2: float  # s²
+    pinned: np.ndarray  # (p,) bool: each parameter held by a bound at x (:func:`_pinned`)
 
 
 class Profiler:
@@ -254,7 +255,8 @@ class Profiler:
         rss = float(residual @ residual)
         dof = max(residual.size - int(np.sum(np.asarray(fit.at_bound) == 0)), 1)
         threshold = determination_threshold(rss, dof)
-        self.optimum = _Optimum(x, rss, model.jacobian(x), threshold, rss / dof)
+        pinned = _pinned(model.coordinates.to_unit(x))
+        self.optimum = _Optimum(x, rss, model.jacobian(x), threshold, rss / dof, pinned)
         self.better: np.ndarray | None = None  # a point below the optimum: another basin
         self.seen: list[_Step] = []  # every re-fit so far (of any quantity)
         self.shared = 0  # of them, told another profiler (:func:`_share`)
@@ -498,7 +500,7 @@ class Profiler:
         fresh Jacobian finds ρ < 0 (cover-056 of 240, Haswell kernels)."""
         coordinates = self.model.coordinates
         moduli = coordinates.sectioned()
-        held = _pinned(coordinates.to_unit(self.optimum.x))[moduli]
+        held = self.optimum.pinned[moduli]
         return bool(np.any(held & ~_pinned(coordinates.to_unit(x))[moduli]))
 
     def _farthest_under(self, quantity: Quantity, q0: float, sign: float) -> _Step:
@@ -523,9 +525,7 @@ class Profiler:
         point = model.point(x)
         if delta < -BETTER_CHI2 * optimum.sigma2:
             self.better = point
-        pinned = _pinned(self.model.coordinates.to_unit(x)) & ~_pinned(
-            self.model.coordinates.to_unit(optimum.x)
-        )
+        pinned = _pinned(self.model.coordinates.to_unit(x)) & ~optimum.pinned
         if quantity.name in model.problem.space.names:
             pinned[model.problem.space.names.index(quantity.name)] = False
         reached = max(sign * (quantity.scaled(point) - q0), 0.0)
@@ -960,14 +960,13 @@ def profile(
     }
     found: dict[str, Profile] = {}
     profiled = [(q, linear) for q, linear in quantities if q.name not in derived]
+    owner = {q.name: sections if q.name in SECTIONS else profiler for q, _ in profiled}
     for quantity, linear in profiled:
-        which = sections if quantity.name in SECTIONS else profiler
         _share(profiler, sections)
-        found[quantity.name] = which.profile(quantity, linear)
+        found[quantity.name] = owner[quantity.name].profile(quantity, linear)
     _share(profiler, sections)
     for quantity, _ in profiled:  # an end a later profile's point contradicts: again
-        which = sections if quantity.name in SECTIONS else profiler
-        found[quantity.name] = which.revisited(quantity, found[quantity.name])
+        found[quantity.name] = owner[quantity.name].revisited(quantity, found[quantity.name])
     theta = model.point(profiler.optimum.x)
     for quantity, _ in quantities:
         if quantity.name in derived:
