@@ -99,7 +99,8 @@ def record(out: Path) -> None:
     spy = shutil.which("py-spy", path=str(Path(sys.executable).parent)) or shutil.which("py-spy")
     if spy is None:
         raise SystemExit("py-spy not found; pip install -e '.[dev]' installs it")
-    command = [sys.executable, "-m", "pytest", "-q", "-n", "auto", "--dist", "worksteal"]
+    # scripts/test.sh's pytest options (the waiting tests in a process of their own)
+    command = [sys.executable, "-m", "pytest", "-q", "-n", "auto", "--dist", "loadgroup"]
     command += ["-p", "no:cacheprovider"]
     start = time.perf_counter()
     spy_options = ["--subprocesses", "--nonblocking", "-r", str(RATE_HZ), "-f", "raw"]

@@ -19,6 +19,26 @@ REPO = Path(__file__).resolve().parents[1]
 REFERENCE = REPO / "tests" / "reference"
 
 
+# The tests that mostly wait (on workers' heartbeats, Slurm's scheduler, a database restarted
+# under them): alone, one after another, tests/cluster and tests/workers took 316 s and
+# used 135 s of CPU (42 % of a core; 2-core AMD EPYC, 2026-12-06). scripts/test.sh runs them
+# in one pytest process of their own (``--dist loadgroup``), one at a time as before on any
+# one process, beside one process a core for the rest, so the cores are busy while they wait.
+WAITING = ("tests/cluster/", "tests/workers/")
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if item.nodeid.startswith(WAITING):
+            item.add_marker(pytest.mark.xdist_group("waiting"))
+
+
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
+    """``-n auto``: one pytest process a core, and one for the tests that mostly wait."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return (cores or 1) + 1
+
+
 @pytest.fixture(scope="session")
 def reference_dir() -> Path:
     return REFERENCE

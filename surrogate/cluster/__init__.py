@@ -6,10 +6,13 @@ which launcher runs their workers. The contract (submit, poll, cancel) is
 :class:`Launcher`; Slurm's is :class:`SlurmLauncher`.
 """
 
+from .._lazy import lazy_attributes
 from ._fleet import Demand, Fleet, jobs_to_submit
 from ._launcher import JobRequest, JobState, Launcher, available_launchers, get_launcher
-from ._reach import check_reachable
 from ._slurm import SlurmLauncher
+
+# loads the storages (Optuna, SQLAlchemy): not for every command's --launcher option
+_LAZY = {"check_reachable": "._reach"}
 
 __all__ = [
     "Demand",
@@ -23,3 +26,5 @@ __all__ = [
     "get_launcher",
     "jobs_to_submit",
 ]
+
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, __all__)
