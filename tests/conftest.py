@@ -1,5 +1,6 @@
 import os
 from pathlib import Path
+from typing import Any
 
 import pytest
 from threadpoolctl import threadpool_limits
@@ -19,18 +20,34 @@ REPO = Path(__file__).resolve().parents[1]
 REFERENCE = REPO / "tests" / "reference"
 
 
-# The tests that mostly wait (on workers' heartbeats, Slurm's scheduler, a database restarted
-# under them): alone, one after another, tests/cluster and tests/workers took 316 s and
-# used 135 s of CPU (42 % of a core; 2-core AMD EPYC, 2026-12-06). scripts/test.sh runs them
-# in one pytest process of their own (``--dist loadgroup``), one at a time as before on any
-# one process, beside one process a core for the rest, so the cores are busy while they wait.
+# How scripts/test.sh (``-n auto --dist loadgroup``) spreads the tests over its processes:
+# - The tests that mostly wait (on workers' heartbeats, Slurm's scheduler, a database
+#   restarted under them) run one after another in a process of their own, beside one
+#   process a core for the rest, so the cores are busy while they wait: alone, one after
+#   another, tests/cluster and tests/workers took 316 s and used 135 s of CPU (42 % of a
+#   core; 2-core AMD EPYC, 2026-12-06). The group is named by path in the scheduler below:
+#   pytest-xdist 3.8 names a group from ``xdist_group`` marks by rewriting ``item._nodeid``,
+#   which pytest 9.2 no longer reads (every marked test ran on its own).
+# - The slow tests are sent first, so the last ones to finish are short.
 WAITING = ("tests/cluster/", "tests/workers/")
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """``--dist loadgroup``: xdist's scheduling of groups, the group being WAITING's tests."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class WaitingApart(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return "waiting" if nodeid.startswith(WAITING) else nodeid
+
+    return WaitingApart(config, log)
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    for item in items:
-        if item.nodeid.startswith(WAITING):
-            item.add_marker(pytest.mark.xdist_group("waiting"))
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)  # stable
 
 
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
