@@ -5,8 +5,8 @@ from typing import Any
 import pytest
 from threadpoolctl import threadpool_limits
 
-# One BLAS thread a test process, and in the processes tests start: the suite runs one
-# pytest process a core (pytest-xdist), and on this product's small matrices a second
+# One BLAS thread a test process, and in the processes tests start: the suite runs a pytest
+# process a core and one more (pytest-xdist, below), and on this product's small matrices a second
 # OpenBLAS thread only spins (test_diagnose's tension case, alone on the 2-core machine:
 # 49 s wall and 50 s CPU with one thread, 59 s and 95 s with two). The results do not
 # depend on it (tests/test_calibrate_sweep.py runs both thread counts on purpose).
