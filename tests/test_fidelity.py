@@ -525,6 +525,42 @@ def test_diagnosis_names_a_hidden_effect_confirming_it_on_the_expensive_solver(
     assert all(c["confirmed_by"] is None for c in unconfirmed)
 
 
+HARDENING_TESTS = [  # benchmarks/fidelity.py's hidden-hardening set: two lengths, replicates
+    {"test_id": "a1", "bending_length_mm": 10.0, "temperature_c": 21.0},
+    {"test_id": "a2", "bending_length_mm": 10.0, "temperature_c": 24.0},
+    {"test_id": "b1", "bending_length_mm": 15.0, "temperature_c": 22.5},
+    {"test_id": "b2", "bending_length_mm": 15.0, "temperature_c": 21.5},
+]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 4])
+def test_a_better_basin_of_the_current_model_does_not_unname_a_leader_that_beats_it(
+    distorted_solver, log_runs, seed
+):
+    """Hidden hardening in curves the expensive solver made: the basin check finds the
+    base model refitted from hardening's optimum (hardening off) 2-3 % better than its
+    calibration, which with an external solver is not recalibrated here. Hardening still
+    fits decisively better than that basin, so it is named and the verdict says what the
+    basin took back (before: "no effect is named" on seeds 0, 1, 2 and 4 of 0-4) — in at
+    most 20 expensive runs (issue 66)."""
+    truth = {"ecoat_gpa": 1.2, "scoat_gpa": 0.1, "tcoat_mm": 0.02}
+    hidden = {"hardening": {"ratio": 0.1}}
+    path = _calibration_study(log_runs / "diag", HARDENING_TESTS, truth, hidden=hidden, seed=seed)
+    data_runs = _expensive_runs(log_runs)
+    result = surrogate.diagnose(path, progress=False, jobs=1)
+    (entry,) = result.rebased
+    assert entry["found_by"] == "hardening" and not entry["replaced"] and entry["still_named"]
+    assert entry["rmse_after_n"] < entry["rmse_before_n"]
+    assert entry["delta_bic_against_it"] < -10
+    assert "part of the gain was the basin's" in result.verdict
+    assert "missing effect: hardening" in result.verdict, result.verdict
+    leader = result.ranking[0]
+    assert leader["effect"] == "hardening" and leader["confirmed_by"] == "test-distorted"
+    assert leader["rmse_n"] <= 1.3 * result.noise_n
+    assert result.solver_calls == _expensive_runs(log_runs) - data_runs <= 20
+
+
 @pytest.mark.slow
 def test_a_diagnosis_whose_calibration_dropped_the_correction_still_ranks_on_it(
     distorted_solver, log_runs
