@@ -38,7 +38,13 @@ from ..study._lab_files import sources_sha256
 from ..study._space import ParameterSpace
 from ..study._spec import StudySpec
 from ._determination import at_bound_text, interval_text, parameter_interval_text
-from ._fidelity import LOW_FIDELITY_BUDGET, CorrectedCalibration, CorrectedRuns, CurveCorrection
+from ._fidelity import (
+    LOW_FIDELITY_BUDGET,
+    CorrectedCalibration,
+    CorrectedRuns,
+    CurveCorrection,
+    Enough,
+)
 from ._local import LocalFit, bound_sides
 from ._loop import (
     SETTLED,
@@ -278,6 +284,7 @@ def run_calibration(
     queue: Any = None,
     intervals: bool = True,
     reuse: bool = False,
+    enough: Enough | None = None,
 ) -> tuple[CalibrationResult, CalibrationLoop | None]:
     """:func:`calibrate`, and the loop it ran (the diagnosis reads its correction).
 
@@ -293,6 +300,8 @@ def run_calibration(
     intervals are computed (the linear ones stand, unchecked: a diagnosis's candidates).
     With ``reuse``, the result recorded for the same :func:`calibration_key` stands where
     there is one, not run again; its loop is then None (the diagnosis's current model).
+    ``enough`` (an external solver's loop): a rule that stops its expensive runs where the
+    best verified point settles the caller's question (the diagnosis's).
     """
     check_jobs(jobs)
     check_budget(max_solver_calls)  # bad options fail before anything is read or written
@@ -334,6 +343,7 @@ def run_calibration(
             label=name,
             correction=correction,
             certify=certify,
+            enough=enough,
         )
     else:
         runs = CorrectedRuns(problem, cache, jobs=jobs, correction=correction)
@@ -481,6 +491,9 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
     multi = _multi_fidelity(loop, best)
     if multi is not None:
         message += multi.pop("sentence")
+        assert isinstance(loop, CorrectedCalibration)
+        if loop.settled is not None:
+            message += f"; the expensive runs stopped there: {loop.settled}"
         if misfit == "systematic" and isinstance(loop, CorrectedCalibration):
             message += loop.basin_caveat()
     return replace(

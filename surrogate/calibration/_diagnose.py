@@ -70,7 +70,7 @@ from ._calibrate import (
 from ._compare import BANDS, angle_bands
 from ._fidelity import CorrectedCalibration, CorrectedRuns, CurveCorrection
 from ._local import ResidualModel, SolverFailed, local_fit
-from ._loop import SETTLED, CalibrationLoop, SolverRuns
+from ._loop import SETTLED, CalibrationLoop, SolverRuns, VerifiedPoint
 from ._problem import (
     CalibrationProblem,
     calibration_study_name,
@@ -78,6 +78,7 @@ from ._problem import (
     model_label,
 )
 from ._statistics import (
+    NEAR_NOISE,
     SIGNIFICANCE,
     Candidate,
     bic,
@@ -97,6 +98,42 @@ _LOCAL_EVALS = 40  # residual evaluations of one local refit (each G solver runs
 CONFIRM_ROUNDS = 2  # rounds of confirming the leaders with an expensive solver
 BASIN_ROUNDS = 2  # calibrations replaced, at most, where the basin check finds a better one
 LOO_PRIOR_UNIT = 0.05  # prior SD of a parameter in the held-out refits, fraction of its range
+# how many times lower the current model's RMSE may yet go where a diagnosis stopped its
+# expensive runs short of a verified local optimum (``_base_settled``): the most an expensive
+# local phase has taken off is 2.1 × (CalculiX *paper* curves, seed 1: 0.114 → 0.054 N)
+BASE_GAIN = 3.0
+
+
+def _base_settled(loop: CalibrationLoop, best: VerifiedPoint) -> str | None:
+    """The diagnosis's rule for the current model's calibration with an external solver:
+    its expensive runs (after the corrected optimum and the probes that teach the
+    correction) stop where its verified misfit would be systematic at a ``BASE_GAIN``-fold
+    lower RMSE too — more runs there can lower its RMSE, not make it fit — and a leader
+    is named only where it is decisive against that lower RMSE as well
+    (:func:`_decisive_against_lower`; else the calibration is run to its end and the
+    candidates ranked again)."""
+    if loop.p_value_at(replace(best, rmse=best.rmse / BASE_GAIN)) >= SIGNIFICANCE:
+        return None
+    return (
+        f"its misfit ({best.rmse / loop.noise:.3g} × noise) would be systematic at a "
+        f"{BASE_GAIN:g}-fold lower RMSE too (a diagnosis's rule: a leader is named only where "
+        "it is decisive against that lower RMSE as well)"
+    )
+
+
+def _leader_settled(loop: CalibrationLoop, best: VerifiedPoint) -> str | None:
+    """The diagnosis's rule for a leader's confirmation on the expensive solver: its
+    expensive runs stop at the first verified point near the noise (RMSE ≤ ``NEAR_NOISE``
+    × noise, or within it on the F-test). A verified RMSE is an upper bound of the
+    leader's best, so its ΔBIC against the current model can only fall, and a leader near
+    the noise leaves nothing unexplained: no run after it can change the verdict."""
+    if best.rmse > NEAR_NOISE * loop.noise and loop.p_value_at(best) < SIGNIFICANCE:
+        return None
+    return (
+        f"its verified misfit is near the noise ({best.rmse / loop.noise:.3g} × noise): no "
+        "more runs can change the verdict (a diagnosis's rule)"
+    )
+
 
 _LOG = logging.getLogger(__name__)
 
@@ -234,12 +271,14 @@ def _diagnose(
     name = calibration_study_name(spec, chosen)
 
     def calibrated(
-        start: Mapping[str, float] | None = None,
+        start: Mapping[str, float] | None = None, *, to_the_end: bool = False
     ) -> tuple[Any, CalibrationLoop | None]:
         """The current model's calibration (a ladder step), or its replacement from a better
         basin's ``start`` (the built-in solver's loop only). The first: the one recorded for
         the same inputs (:func:`~._calibrate.calibration_key`), where there is one; it is
-        not run again (its loop, None then, is needed only with an external solver)."""
+        not run again (its loop, None then, is needed only with an external solver). With
+        an external solver its expensive runs stop by :func:`_base_settled` unless
+        ``to_the_end``."""
         return run_calibration(
             spec,
             effects=chosen,
@@ -251,6 +290,7 @@ def _diagnose(
             queue=queue,
             start=start,
             reuse=start is None,
+            enough=None if to_the_end else _base_settled,
         )
 
     say = _Say(progress, f"{spec.name}/diagnose")
@@ -302,6 +342,16 @@ def _diagnose(
             ranking = refits.recalibrate(ranking)
             if correction is not None:
                 ranking = refits.confirm(ranking, current, fitted)
+        if _stopped_short(loop) and not _decisive_against_lower(ranking, current, problem):
+            say(
+                f"the calibration of {model_label(chosen)} stopped its expensive runs early "
+                f"and the leader is not decisive against a {BASE_GAIN:g}-fold lower RMSE: it "
+                "is run to its end and the candidates ranked again"
+            )
+            spent += fitted.solver_calls + refits.expensive_calls
+            fitted, loop = calibrated(to_the_end=True)
+            correction = _correction(loop, say)
+            continue
         if rebased and not rebased[-1]["replaced"]:
             break  # the ranking is against a calibration not at its best: named is nothing
         behind = refits.basin_behind(ranking, misfit) if misfit.systematic else None
@@ -332,10 +382,37 @@ def _diagnose(
     if loop is None:  # the recorded calibration stood (a replacement has its loop)
         result = replace(result, reused_calibration=name)
     if correction is not None:
-        result = _with_fidelity(result, refits, loop, fitted, skipped)
+        result = _with_fidelity(result, refits, loop, fitted, skipped, spent)
     _attach_ladder(url, name, result, fitted.to_json())
     say(result.verdict)
     return result
+
+
+def _stopped_short(loop: CalibrationLoop | None) -> bool:
+    """Whether the current model's calibration stopped its expensive runs by
+    :func:`_base_settled`."""
+    return isinstance(loop, CorrectedCalibration) and loop.settled is not None
+
+
+def _decisive_against_lower(
+    ranking: Sequence[Candidate], current: _Refit, problem: CalibrationProblem
+) -> bool:
+    """Whether the leader (and each tied with it) would still be named against the current
+    model at a ``BASE_GAIN``-fold lower RMSE (its misfit scaled down): what a calibration
+    stopped by :func:`_base_settled` may yet reach. True where nothing would be named
+    anyway (no leader that is named now)."""
+    if not ranking or not named(ranking[0], current.heldout_rmse):
+        return True
+    lower = replace(
+        current,
+        residual=current.residual / BASE_GAIN,
+        heldout_rmse=current.heldout_rmse / BASE_GAIN,
+    )
+    return all(
+        _against_basin(c, current, lower, problem.n_points) is not None
+        for c in ranking
+        if tied(c, ranking[0])
+    )
 
 
 def _correction(loop: CalibrationLoop | None, say: _Say) -> CurveCorrection | None:
@@ -382,8 +459,11 @@ def _with_fidelity(
     loop: CalibrationLoop | None,
     fitted: CalibrationResult,
     skipped: dict[str, str],
+    spent: int,
 ) -> DiagnosisResult:
-    """The multi-fidelity record of a diagnosis, and its verdict's last words."""
+    """The multi-fidelity record of a diagnosis, and its verdict's last words: what the
+    expensive runs were spent on (``spent``: those of a calibration of the current model
+    run again to its end, :func:`_decisive_against_lower`)."""
     assert isinstance(loop, CorrectedCalibration)
     kind = loop.problem.spec.solver
     record = fidelity_record(
@@ -396,24 +476,28 @@ def _with_fidelity(
     record.pop("sentence")
     record["confirmed"] = list(refits.confirmed)
     record["skipped"] = [{"effect": e, "reason": r} for e, r in skipped.items()]
+    record["spent"] = {
+        "calibration": spent + fitted.solver_calls,
+        "calibration_stopped": loop.settled,
+        "confirmations": dict(refits.confirm_calls),
+    }
     dropped = (
         f", which the current model's calibration dropped after {loop.dropped_after} "
         f"{kind} runs ({loop.dropped})"
         if loop.dropped is not None
         else ""
     )
+    total = spent + fitted.solver_calls + refits.expensive_calls
+    stopped = " (stopped early: its misfit is systematic beyond doubt)" if loop.settled else ""
+    uses = [f"{spent + fitted.solver_calls} calibrating {model_label(refits.chosen)}{stopped}"]
+    uses += [f"{n} confirming {effect}" for effect, n in refits.confirm_calls.items()]
     verdict = result.verdict + (
         f" (candidates refitted on the built-in model corrected towards {kind}{dropped}"
         + (f"; confirmed on {kind}: {', '.join(refits.confirmed)}" if refits.confirmed else "")
         + (f"; skipped, {kind} cannot model them: {', '.join(skipped)}" if skipped else "")
-        + ")"
+        + f"; {total} {kind} runs: {', '.join(uses)})"
     )
-    return replace(
-        result,
-        verdict=verdict,
-        solver_calls=fitted.solver_calls + refits.expensive_calls,
-        multi_fidelity=record,
-    )
+    return replace(result, verdict=verdict, solver_calls=total, multi_fidelity=record)
 
 
 def _rebased(
@@ -661,6 +745,7 @@ class _Refits:
         self.solver_calls = 0
         self.expensive_calls = 0
         self.confirmed: list[str] = []
+        self.confirm_calls: dict[str, int] = {}  # expensive runs of each confirmation
         self._confirmation_low_runs = 0
 
     @property
@@ -837,9 +922,11 @@ class _Refits:
             certify=False,
             queue=self.queue,
             intervals=False,  # a confirmation ranks an effect: it states no intervals
+            enough=_leader_settled,
         )
         assert loop is not None  # run: a recorded result is taken only with reuse
         self.expensive_calls += found.solver_calls
+        self.confirm_calls[candidate.effect] = found.solver_calls
         if found.multi_fidelity is not None:
             self._confirmation_low_runs += found.multi_fidelity["low_fidelity_runs"]
         self.confirmed.append(candidate.effect)

@@ -33,7 +33,7 @@ The scheme's rules are :mod:`surrogate.solvers._fidelity`'s. Here:
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -88,6 +88,8 @@ CRAWL = 2  # verified proposals in a row, each gaining under ROUGH_CHI2 units of
 MIN_RADIUS = FIRST_ORDER_BOX / BACKTRACK[-1]  # the smallest step the first-order test tries
 VERIFY_RUNS = 10  # expensive runs at the profile ends, at most (on top of the calibration's)
 VERIFIED = (0.5, 2.0)  # the expensive misfit at an end: within this of the threshold, it stands
+# a caller's rule (the diagnosis's): why the best verified point settles its question, or None
+Enough = Callable[[CalibrationLoop, VerifiedPoint], str | None]
 
 
 def _step(model: ResidualModel, theta: np.ndarray, best: VerifiedPoint) -> float:
@@ -188,10 +190,13 @@ class CorrectedCalibration(CalibrationLoop):
         label: str,
         correction: CurveCorrection | None = None,
         certify: bool = True,
+        enough: Enough | None = None,
     ) -> None:
         super().__init__(problem, runs, noise=noise, budget=budget, progress=progress, label=label)
         self.correction = correction or CurveCorrection()
         self.certify = certify
+        self.enough = enough
+        self.settled: str | None = None  # why ``enough`` stopped the expensive runs
         self._corrected_fits: list[LocalFit] = []  # the corrected model's tests (``_test``)
         self.low_used: set[str] = set()
         self.misses = MissCounter()
@@ -343,21 +348,39 @@ class CorrectedCalibration(CalibrationLoop):
             self._single_fidelity(surrogate_trials)
             return
         while self.verified and self.dropped is None and self.verifications_left():
+            if self._settled():
+                break
             proposal = self._next()
             if proposal is None:
                 break
             self._manage_radius(self._teach(proposal))  # a failed run: a smaller region
-            if self.stalled is not None and not self._expensive_round():
+            if self.stalled is not None and (self._settled() or not self._expensive_round()):
                 break
         if self.dropped is not None:
-            self._fall_back()
+            if self._settled():
+                self._keep_untested(self.settled)
+            else:
+                self._fall_back()
             return
         self._tested_best()
         if not self.converged_at_best():
             short = "the corrected model's loop ended short of a verified local optimum"
-            self._fall_back(self.stalled or short, near=True)
+            if not self._settled():
+                self._fall_back(self.stalled or short, near=True)
         elif self.certify:
             self._certify()
+
+    def _settled(self) -> bool:
+        """Whether the caller's question is settled at the best verified point (its rule
+        ``enough``: a diagnosis's, :mod:`._diagnose`): then nothing more runs on the
+        expensive solver — no proposal, no expensive first-order test or local phase —
+        and ``settled`` says why (the result's message too)."""
+        best = self.best()
+        if self.settled is None and self.enough is not None and best is not None:
+            self.settled = self.enough(self, best)
+            if self.settled is not None:
+                self._say(f"{self.settled}: no more expensive runs")
+        return self.settled is not None
 
     def _certify(self) -> None:
         """Where the corrected model's first-order test is what held at the best verified
@@ -830,12 +853,19 @@ class CorrectedCalibration(CalibrationLoop):
             if len(self.fits) > before:  # it ran: its verdict replaces the corrected model's
                 self.fits = [f for f in self.fits if not self.by_corrected_model(f)]
             return
-        # nothing more is run, but the best point keeps a fit saying why (a diagnosis's
-        # confirmation reads its residual), in place of its corrected-model test's
         assert self.short is not None  # set by _test_fits
+        self._keep_untested(self.short)
+
+    def _keep_untested(self, why: str | None) -> None:
+        """Nothing more is run, but the best point keeps a fit saying ``why`` (a
+        diagnosis's confirmation reads its residual), in place of its corrected-model
+        test's."""
+        start = self.best()
+        if start is None or why is None:
+            return
         nothing_left = ResidualModel(self.problem, self.runs, budget=self.runs.calls)
         try:
-            self._keep_fit(untested_fit(nothing_left, start.theta, self.short))
+            self._keep_fit(untested_fit(nothing_left, start.theta, why))
         except SolverFailed:
             return
 
