@@ -519,7 +519,15 @@ def test_diagnosis_names_a_hidden_effect_confirming_it_on_the_expensive_solver(
     assert "bare-webbing" in mf["skipped"][0]["reason"]
     assert "skipped, test-distorted cannot model them: membrane_bending" in result.verdict
     assert "membrane_bending" not in [c["effect"] for c in result.ranking]
-    assert result.solver_calls == _expensive_runs(log_runs) - data_runs <= 60
+    # issue 66: ≤ 20 expensive runs a verdict, and the verdict says what they went to
+    assert result.solver_calls == _expensive_runs(log_runs) - data_runs <= 20
+    spent = mf["spent"]
+    assert spent["calibration"] + sum(spent["confirmations"].values()) == result.solver_calls
+    assert list(spent["confirmations"]) == ["tension"]
+    assert f"{result.solver_calls} test-distorted runs: {spent['calibration']} calibrating" in (
+        result.verdict
+    )
+    assert f"{spent['confirmations']['tension']} confirming tension" in result.verdict
     assert mf["low_fidelity_runs"] > result.solver_calls
     unconfirmed = [c for c in result.ranking if c["effect"] != "tension"]
     assert all(c["confirmed_by"] is None for c in unconfirmed)
@@ -559,6 +567,33 @@ def test_a_better_basin_of_the_current_model_does_not_unname_a_leader_that_beats
     assert leader["effect"] == "hardening" and leader["confirmed_by"] == "test-distorted"
     assert leader["rmse_n"] <= 1.3 * result.noise_n
     assert result.solver_calls == _expensive_runs(log_runs) - data_runs <= 20
+
+
+@pytest.mark.slow
+def test_a_leader_not_decisive_against_the_early_stop_reruns_the_calibration_to_its_end(
+    distorted_solver, log_runs, monkeypatch, caplog
+):
+    """Where the leader would not be decisive against the 3-fold lower RMSE a calibration
+    stopped early may yet reach (here forced), the current model's calibration is run to
+    its end (no early stop) and the candidates ranked again; its runs of both attempts
+    count (a run both used counts twice: an upper bound)."""
+    from surrogate.calibration import _diagnose
+
+    monkeypatch.setattr(_diagnose, "_decisive_against_lower", lambda *args: False)
+    truth = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
+    hidden = {"tension": {"k_e": 0.006, "k_s": 0.006}}
+    path = _calibration_study(log_runs / "diag", DIAGNOSIS_TESTS, truth, hidden=hidden, seed=3)
+    data_runs = _expensive_runs(log_runs)
+    caplog.set_level(logging.INFO, logger="surrogate")
+    result = surrogate.diagnose(path, candidates=["tension", "anisotropy"], jobs=1)
+    said = [r.getMessage() for r in caplog.records]
+    assert sum("it is run to its end and the candidates ranked again" in m for m in said) == 1
+    assert result.verdict.startswith("missing effect: tension")
+    spent = result.multi_fidelity["spent"]
+    assert spent["calibration_stopped"] is None  # the second calibration ran to its end
+    assert "stopped early" not in result.verdict
+    made = _expensive_runs(log_runs) - data_runs
+    assert made <= result.solver_calls == spent["calibration"] + spent["confirmations"]["tension"]
 
 
 @pytest.mark.slow

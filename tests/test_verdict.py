@@ -127,7 +127,8 @@ def _refit(rmse_n: float, n_points: int, p: int, seed: int):
 
     residual = np.random.default_rng(seed).normal(size=n_points)
     residual *= rmse_n / np.sqrt(np.mean(residual**2))
-    return _Refit(None, tuple(f"p{i}" for i in range(p)), np.zeros(p), residual, None, rmse_n, set())
+    names = tuple(f"p{i}" for i in range(p))
+    return _Refit(None, names, np.zeros(p), residual, None, rmse_n, set())
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -156,3 +157,31 @@ def test_a_better_basin_takes_back_only_its_share_of_the_leaders_gain(seed):
     assert partly is not None and -2000 < partly < -10
     assert leader_against(0.0505) is None  # the basin explains the gain: nothing named
     assert leader_against(0.049) is None
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_leader_against_a_calibration_stopped_early_must_beat_a_three_fold_better_fit(seed):
+    """A diagnosis with an external solver stops the current model's expensive runs where
+    its misfit is systematic beyond doubt; a leader is named on it only where it would be
+    decisive against a 3-fold lower RMSE too (else the calibration runs to its end): a
+    leader at the noise against a base at 13 × passes, one that only halves the misfit
+    does not."""
+    from surrogate.calibration._diagnose import _decisive_against_lower
+    from surrogate.calibration._statistics import bic
+
+    n_points = 364
+    current = _refit(0.645, n_points, 3, seed)
+    problem = SimpleNamespace(n_points=n_points)
+
+    def leader(rmse_n: float) -> Candidate:
+        residual = _refit(rmse_n, n_points, 4, seed + 10).residual
+        delta = bic(float(residual @ residual), n_points, 4) - bic(
+            float(current.residual @ current.residual), n_points, 3
+        )
+        return replace(_leader(rmse_n, None), delta_bic=delta, heldout_rmse_n=1.02 * rmse_n)
+
+    assert _decisive_against_lower([leader(0.050)], current, problem)
+    halved = leader(0.32)
+    assert halved.delta_bic < -10  # named against the calibration as it stopped
+    assert not _decisive_against_lower([halved], current, problem)
+    assert _decisive_against_lower([], current, problem)  # nothing named: nothing to rerun

@@ -299,6 +299,7 @@ def _diagnose(
     correction = _correction(loop, say)
     rebased: list[dict[str, Any]] = []
     spent = 0  # solver runs of the rounds before the last (a calibration replaced)
+    confirmed_before: dict[str, int] = {}  # expensive runs of those rounds' confirmations
     beaten = beaten_by(url, name, fitted.to_json())
     if beaten is not None:  # an earlier run of this calibration found a better basin
         rebased.append(
@@ -348,7 +349,9 @@ def _diagnose(
                 f"and the leader is not decisive against a {BASE_GAIN:g}-fold lower RMSE: it "
                 "is run to its end and the candidates ranked again"
             )
-            spent += fitted.solver_calls + refits.expensive_calls
+            spent += fitted.solver_calls
+            for effect, calls in refits.confirm_calls.items():
+                confirmed_before[effect] = confirmed_before.get(effect, 0) + calls
             fitted, loop = calibrated(to_the_end=True)
             correction = _correction(loop, say)
             continue
@@ -382,7 +385,7 @@ def _diagnose(
     if loop is None:  # the recorded calibration stood (a replacement has its loop)
         result = replace(result, reused_calibration=name)
     if correction is not None:
-        result = _with_fidelity(result, refits, loop, fitted, skipped, spent)
+        result = _with_fidelity(result, refits, loop, fitted, skipped, spent, confirmed_before)
     _attach_ladder(url, name, result, fitted.to_json())
     say(result.verdict)
     return result
@@ -460,10 +463,12 @@ def _with_fidelity(
     fitted: CalibrationResult,
     skipped: dict[str, str],
     spent: int,
+    confirmed_before: Mapping[str, int],
 ) -> DiagnosisResult:
     """The multi-fidelity record of a diagnosis, and its verdict's last words: what the
-    expensive runs were spent on (``spent``: those of a calibration of the current model
-    run again to its end, :func:`_decisive_against_lower`)."""
+    expensive runs were spent on (``spent`` and ``confirmed_before``: those of the rounds
+    before a calibration of the current model was run again to its end,
+    :func:`_decisive_against_lower`)."""
     assert isinstance(loop, CorrectedCalibration)
     kind = loop.problem.spec.solver
     record = fidelity_record(
@@ -476,10 +481,13 @@ def _with_fidelity(
     record.pop("sentence")
     record["confirmed"] = list(refits.confirmed)
     record["skipped"] = [{"effect": e, "reason": r} for e, r in skipped.items()]
+    confirmations = dict(confirmed_before)
+    for effect, calls in refits.confirm_calls.items():
+        confirmations[effect] = confirmations.get(effect, 0) + calls
     record["spent"] = {
         "calibration": spent + fitted.solver_calls,
         "calibration_stopped": loop.settled,
-        "confirmations": dict(refits.confirm_calls),
+        "confirmations": confirmations,
     }
     dropped = (
         f", which the current model's calibration dropped after {loop.dropped_after} "
@@ -487,10 +495,10 @@ def _with_fidelity(
         if loop.dropped is not None
         else ""
     )
-    total = spent + fitted.solver_calls + refits.expensive_calls
+    total = spent + fitted.solver_calls + sum(confirmations.values())
     stopped = " (stopped early: its misfit is systematic beyond doubt)" if loop.settled else ""
     uses = [f"{spent + fitted.solver_calls} calibrating {model_label(refits.chosen)}{stopped}"]
-    uses += [f"{n} confirming {effect}" for effect, n in refits.confirm_calls.items()]
+    uses += [f"{n} confirming {effect}" for effect, n in confirmations.items()]
     verdict = result.verdict + (
         f" (candidates refitted on the built-in model corrected towards {kind}{dropped}"
         + (f"; confirmed on {kind}: {', '.join(refits.confirmed)}" if refits.confirmed else "")
