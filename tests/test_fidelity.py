@@ -511,7 +511,10 @@ def test_diagnosis_names_a_hidden_effect_confirming_it_on_the_expensive_solver(
     leader = result.ranking[0]
     assert leader["effect"] == "tension" and leader["confirmed_by"] == "test-distorted"
     assert leader["delta_bic"] < -10 and leader["rmse_n"] <= 1.3 * result.noise_n
-    assert leader["unsettled"] is None  # its calibration reached a verified local optimum
+    # its calibration stopped at the first verified point near the noise (the rule)
+    assert leader["unsettled"] is None or leader["unsettled"].startswith(
+        "stopped by the diagnosis's rule: its verified"
+    )
     assert result.verdict.startswith("missing effect: tension")
     mf = result.multi_fidelity
     assert mf["confirmed"] == ["tension"]
@@ -628,18 +631,20 @@ def test_a_diagnosis_whose_calibration_dropped_the_correction_still_ranks_on_it(
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("settings", "hidden", "settled"),
+    ("settings", "hidden", "budget", "settled"),
     [
-        # a rough expensive response and 10 runs: the confirmation cannot settle
-        ("rough = 0.02", {"tension": {"k_e": 0.006, "k_s": 0.006}}, False),
+        # a rough expensive response and one verification: the confirmation cannot settle
+        # (with 10 runs it reached the noise in 9 once the corrected model was solved again
+        # where the inherited correction missed)
+        ("rough = 0.02", {"tension": {"k_e": 0.006, "k_s": 0.006}}, 3, False),
         # hardening hidden too but not a candidate: settled, and truly unexplained
-        ("", {"tension": {"k_e": 0.006, "k_s": 0.006}, "hardening": {"ratio": 0.1}}, True),
+        ("", {"tension": {"k_e": 0.006, "k_s": 0.006}, "hardening": {"ratio": 0.1}}, 10, True),
     ],
 )
 def test_a_misfit_after_a_confirmation_is_unexplained_only_where_it_settled(
-    distorted_solver, log_runs, settings, hidden, settled
+    distorted_solver, log_runs, settings, hidden, budget, settled
 ):
-    """The leader's confirmation with 10 expensive runs: where it stopped short of a
+    """The leader's confirmation with few expensive runs: where it stopped short of a
     verified local optimum its entry says why (``unsettled``) and the misfit it leaves
     is open, not "unexplained"; where it reached one, a misfit left is unexplained."""
     truth = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
@@ -647,7 +652,7 @@ def test_a_misfit_after_a_confirmation_is_unexplained_only_where_it_settled(
         log_runs / "diag", DIAGNOSIS_TESTS, truth, hidden=hidden, seed=3, settings=settings
     )
     text = path.read_text().replace(
-        "calibration_solver_calls = 30", "calibration_solver_calls = 10"
+        "calibration_solver_calls = 30", f"calibration_solver_calls = {budget}"
     )
     path.write_text(text)
     result = surrogate.diagnose(path, candidates=["tension", "anisotropy"], progress=False)
@@ -1044,14 +1049,17 @@ def test_not_carried_judges_the_inherited_correction_at_its_first_point():
 
 
 @pytest.mark.slow
-def test_a_correction_learned_on_another_model_hands_its_optimum_to_the_expensive_local_phase(
+def test_a_correction_learned_on_another_model_is_corrected_locally_where_it_missed(
     distorted_solver, log_runs
 ):
     """A calibration with an effect added, inheriting the correction the model without it
     learned (a diagnosis's confirmation): where the correction has not learned the new
-    model's region it is dropped after the first point and the expensive solver's own
-    local phase goes on from there; the same model calibrated again with its own
-    correction keeps it."""
+    model's region (here the expensive solver stiffens with the effect, which the model
+    without it never showed) it misses at the first point; the built-in model corrected by
+    the verified points' own discrepancy then steps towards the expensive optimum, G runs a
+    step, and reaches the noise floor within the budget (the expensive solver's own local
+    phase from the first point spent all 30 runs, at 0.97-9.4 × noise on seeds 1-4); the
+    same model calibrated again with its own correction is not judged."""
     from surrogate.calibration._calibrate import run_calibration
     from surrogate.calibration._fidelity import CurveCorrection
 
@@ -1069,19 +1077,17 @@ def test_a_correction_learned_on_another_model_hands_its_optimum_to_the_expensiv
             path, effects=effects, progress=False, record=False, correction=inherited
         )
 
+    before = _expensive_runs(log_runs)
     found, loop = again(("tension",))
-    assert loop.dropped is not None, loop.dropped
-    assert loop.dropped.startswith("at the corrected model's optimum the correction learned")
-    G = len(loop.problem.groups)
-    assert loop.dropped_after == G  # after the first point, its runs at every group
-    assert loop.fits and loop.verified[0].phase == "verified"  # the local phase from it
+    assert loop.uncarried is not None and loop.dropped is None
+    assert loop.uncarried.startswith("at the corrected model's optimum the correction learned")
+    checks = (found.determination or {}).get("verification_solver_calls", 0)  # profile ends
+    assert found.solver_calls + checks == _expensive_runs(log_runs) - before
+    assert found.solver_calls < 30
     assert found.rmse_n <= 1.3 * found.noise_n, found.message
-    assert "test-distorted's own local phase went on from the best verified point" in (
-        found.message
-    )
 
     _, same = again(())
-    assert same.dropped is None  # its optimum is where its correction learned
+    assert same.uncarried is None and same.dropped is None  # where its correction learned
 
 
 def test_a_budget_below_todays_design_is_the_corrected_loops_to_spend(distorted_solver, log_runs):

@@ -418,6 +418,15 @@ def _decisive_against_lower(
     )
 
 
+def _unsettled(found: CalibrationResult, loop: CalibrationLoop) -> str | None:
+    """Why a confirmation ended before a verified local optimum (None: it reached one),
+    first where the leader's rule stopped it near the noise (:func:`_leader_settled`)."""
+    why = unconverged_reason(found, loop.best_fit())
+    if why is None or not isinstance(loop, CorrectedCalibration) or loop.settled is None:
+        return why
+    return f"stopped by the diagnosis's rule: {loop.settled}; {why}"
+
+
 def _correction(loop: CalibrationLoop | None, say: _Say) -> CurveCorrection | None:
     """The correction the current model's calibration learned (None for a built-in study).
 
@@ -953,7 +962,7 @@ class _Refits:
             delta_bic=bic(rss, n_points, len(verified.theta)) - base,
             params=found.params,
             confirmed_by=self.problem.spec.solver,
-            unsettled=unconverged_reason(found, loop.best_fit()),
+            unsettled=_unsettled(found, loop),
         )
 
 
