@@ -157,8 +157,12 @@ class DiagnosisResult:
     ``low_fidelity_runs``, ``correction`` (its size at the current model's calibrated
     point), ``dropped`` and ``dropped_after`` (why and after how many expensive runs the
     current model's calibration dropped the correction; the candidates are ranked on it
-    all the same, and only a confirmed effect is named). ``solver_calls`` counts the
-    expensive runs.
+    all the same, and only a confirmed effect is named), ``spent``: the expensive runs by
+    purpose — ``calibration`` (the current model's), ``calibration_stopped`` (why the
+    diagnosis's rule stopped them, None where it did not: its misfit systematic at a
+    3-fold lower RMSE too; a leader is then named only where it is decisive against that
+    lower RMSE as well), ``confirmations`` (by effect; each stops at its first verified
+    point near the noise). ``solver_calls`` counts the expensive runs.
 
     ``rmse_n``, ``heldout_rmse_n`` and ``noise_n`` are the current model's RMSE, its
     leave-one-test-out RMSE and the noise level; ``systematic`` whether the F-test

@@ -214,6 +214,7 @@ class CorrectedCalibration(CalibrationLoop):
         self.short: str | None = None  # why an expensive test was not started: the budget left
         self.inherited = bool(self.correction.n_runs)  # learned on another model
         self.uncarried: str | None = None  # why an inherited correction missed at the start
+        self._carrying = False  # within :meth:`_carry`: its steps are not judged by the rules
 
     def smallest_budget(self) -> tuple[int, str]:
         """One verification by the expensive solver (a run at every condition group): at
@@ -345,7 +346,8 @@ class CorrectedCalibration(CalibrationLoop):
         # no probes where the caller's question is settled at the first point (a diagnosis's
         # current model, systematic beyond doubt: its correction only ranks the candidates,
         # and each leader's confirmation is taught where it lies)
-        taught = fit is not None and not self.inherited and not (ran and self._settled())
+        taught = fit is not None and not self.inherited and self.dropped is None
+        taught = taught and not (ran and self._settled())
         probes = self._probes(fit, ran) if taught else []
         for tries in probes:  # the second probe only where the expensive solver failed
             for point in tries:
@@ -393,7 +395,20 @@ class CorrectedCalibration(CalibrationLoop):
         nearly its value there: a Gauss–Newton step on the expensive residual with the
         built-in model's slopes. Before, the expensive solver's own local phase went on
         from the first point: p·G runs a round (on the distorted solver's hidden tension,
-        ``stiffened = 0.3``, 5 parameters and 3 groups, a confirmation spent its 30)."""
+        ``stiffened = 0.3``, 5 parameters and 3 groups, a confirmation spent its 30).
+
+        The steps are not judged by the correction's rules (its size, the global
+        correction's misses): each is verified, and one that gains nothing shrinks the
+        region. On CalculiX's hidden-tension curves the gap grew to 27 % of the curve at
+        40 N (the 25 % the global correction is trusted for) at the fourth point, 0.27 N
+        from 2.26 N, and the expensive local phase took over at p·G = 15 runs a round."""
+        self._carrying = True
+        try:
+            self._carry_steps()
+        finally:
+            self._carrying = False
+
+    def _carry_steps(self) -> None:
         radius, idle = 1.0, 0
         for _ in range(CARRY_ROUNDS):
             best = self.best()
@@ -837,6 +852,8 @@ class CorrectedCalibration(CalibrationLoop):
         of a correction learned on another model — whether it carries to this one
         (:func:`not_carried`: its optimum is then a start). Sets ``dropped``."""
         size = self._measured(point, lows)
+        if self._carrying:  # the local steps' own trust region judges them (:meth:`_carry`)
+            return False
         if size is not None and (reason := correction_refused(size)) is not None:
             return self._drop(reason)
         curves, stds, _ = predicted
@@ -845,8 +862,11 @@ class CorrectedCalibration(CalibrationLoop):
             error = float(np.sqrt(np.mean((point.curves - curves) ** 2)))
             sd = float(np.sqrt(np.mean(stds**2)))
             if carried_here and (why := not_carried(error, sd, self.noise)) is not None:
-                self.uncarried = why  # taught now: the corrected model is solved again
-                self._say(f"{why}: the corrected model, taught this point, is solved again")
+                self.uncarried = why  # taught now: local steps from it (:meth:`_carry`)
+                self._say(
+                    f"{why}: the built-in model corrected by the verified points' own "
+                    "discrepancy steps on from it"
+                )
                 return False
             if self.misses.judge(error, sd, self.noise):
                 return self._drop(self.misses.reason)
