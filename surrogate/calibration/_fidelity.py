@@ -416,7 +416,7 @@ class CorrectedCalibration(CalibrationLoop):
                 return
             if self._settled() or idle >= 2:
                 return
-            recent = [point for point in self.verified[-2:] if point is not best][-1:]
+            recent = [point for point in self.verified[-3:] if point is not best][-2:]
             local = self._local_correction([best, *recent])
             model = ResidualModel(self.problem, self.corrected_runs(local))
             try:
