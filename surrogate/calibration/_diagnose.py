@@ -428,7 +428,8 @@ def _unsettled(found: CalibrationResult, loop: CalibrationLoop) -> str | None:
     why = unconverged_reason(found, loop.best_fit())
     if why is None or not isinstance(loop, CorrectedCalibration) or loop.settled is None:
         return why
-    return f"stopped by the diagnosis's rule: {loop.settled}; {why}"
+    rule = f"stopped by the diagnosis's rule: {loop.settled}"
+    return rule if loop.settled in why else f"{rule}; {why}"
 
 
 def _correction(loop: CalibrationLoop | None, say: _Say) -> CurveCorrection | None:
