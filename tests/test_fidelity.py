@@ -573,6 +573,30 @@ def test_a_better_basin_of_the_current_model_does_not_unname_a_leader_that_beats
 
 
 @pytest.mark.slow
+def test_a_diagnosis_after_calibrate_keeps_its_result_and_names_the_effect(
+    distorted_solver, log_runs
+):
+    """``calibrate`` runs the current model to its end and records it; a diagnosis after it
+    stops its own calibration of that model early (the rule), so that calibration fits
+    worse than the recorded one. It must not replace the recorded result, and being known
+    short of its best, an earlier point within the 3-fold its rule allows for is no
+    "better basin" that unnames the leader."""
+    import optuna
+
+    truth = {"ecoat_gpa": 1.2, "scoat_gpa": 0.15, "tcoat_mm": 0.02}
+    hidden = {"tension": {"k_e": 0.006, "k_s": 0.006}}
+    path = _calibration_study(log_runs / "diag", DIAGNOSIS_TESTS, truth, hidden=hidden, seed=3)
+    calibrated = surrogate.calibrate(path, progress=False)
+    result = surrogate.diagnose(path, candidates=["tension", "anisotropy"], progress=False)
+    assert result.multi_fidelity["spent"]["calibration_stopped"] is not None
+    assert result.rmse_n > calibrated.rmse_n  # stopped short of what calibrate reached
+    assert not result.rebased, result.rebased
+    assert result.verdict.startswith("missing effect: tension"), result.verdict
+    study = optuna.load_study(study_name=calibrated.study, storage=calibrated.storage)
+    assert study.user_attrs["result"]["rmse_n"] == calibrated.rmse_n  # calibrate's stands
+
+
+@pytest.mark.slow
 def test_a_leader_not_decisive_against_the_early_stop_reruns_the_calibration_to_its_end(
     distorted_solver, log_runs, monkeypatch, caplog
 ):

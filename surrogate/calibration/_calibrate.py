@@ -375,7 +375,8 @@ def run_calibration(
             result = replace(
                 result, next_test=checked, message=f"{result.message}; {checked['sentence']}"
             )
-        _record(result.storage, name, problem, loop.verified, result, data_hash(spec), key)
+        stopped = isinstance(loop, CorrectedCalibration) and loop.settled is not None
+        _record(result.storage, name, problem, loop.verified, result, data_hash(spec), key, stopped)
     return result, loop
 
 
@@ -485,15 +486,13 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
         storage=url,
         message="",
     )
-    message = _message(problem, result, fit, loop.basins.sentence(loop.noise))
+    stopped = loop.settled if isinstance(loop, CorrectedCalibration) else None
+    message = _message(problem, result, fit, loop.basins.sentence(loop.noise), stopped)
     retried, sentence = _retried(loop, best)
     message += sentence
     multi = _multi_fidelity(loop, best)
     if multi is not None:
         message += multi.pop("sentence")
-        assert isinstance(loop, CorrectedCalibration)
-        if loop.settled is not None:
-            message += f"; the expensive runs stopped there: {loop.settled}"
         if misfit == "systematic" and isinstance(loop, CorrectedCalibration):
             message += loop.basin_caveat()
     return replace(
@@ -540,6 +539,8 @@ def _multi_fidelity(loop: CalibrationLoop, best: VerifiedPoint) -> dict[str, Any
         f"{kind}'s own calibration took over"
         if loop.single_fidelity
         else f"{kind}'s own local phase went on from the best verified point"
+        if loop.settled is None
+        else f"nothing more ran on {kind} (stopped by a diagnosis's rule)"
     )
     record = fidelity_record(
         kind,
@@ -592,6 +593,7 @@ def _message(
     result: CalibrationResult,
     fit: LocalFit | None,
     basins: str = "",
+    stopped: str | None = None,
 ) -> str:
     """The calibration's one message. Unconverged: the local fit's reason, and "raise
     --budget" only where the budget is what stopped it (``budget_exhausted``); a fit
@@ -610,6 +612,8 @@ def _message(
         hint = (
             "raise --budget"
             if result.status == "budget_exhausted"
+            else f"its expensive runs were stopped by a diagnosis's rule: {stopped}"
+            if stopped is not None
             else "the budget was not the limit: a larger one would not have been spent"
         )
         text = f"{text} ({why}; best verified point so far — {hint}){basins}"
@@ -729,9 +733,12 @@ def _record(
     result: CalibrationResult,
     data_sha: str,
     inputs_key: str | None,
+    stopped: bool = False,
 ) -> None:
     """Verifications as trials of the study ``name``; the result as a study attribute,
-    with the :func:`calibration_key` of its inputs (None: not one to reuse)."""
+    with the :func:`calibration_key` of its inputs (None: not one to reuse) — except where
+    a rule ``stopped`` the calibration short (a diagnosis's) and an earlier result stands:
+    the trials only."""
     quiet_optuna()
     study = optuna.create_study(study_name=name, storage=open_storage(url), load_if_exists=True)
     known = {
@@ -761,6 +768,8 @@ def _record(
             },
         )
         study.add_trial(trial)
+    if stopped and "result" in study.user_attrs:
+        return
     study.set_user_attr("result", json.loads(json.dumps(result.to_json())))
     study.set_user_attr("data_sha256", data_sha)
     study.set_user_attr("calibration_key", inputs_key)

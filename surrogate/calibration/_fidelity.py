@@ -347,7 +347,7 @@ class CorrectedCalibration(CalibrationLoop):
         # current model, systematic beyond doubt: its correction only ranks the candidates,
         # and each leader's confirmation is taught where it lies)
         taught = fit is not None and not self.inherited and self.dropped is None
-        taught = taught and not (ran and self._settled())
+        taught = taught and not (ran and self._rule_holds())
         probes = self._probes(fit, ran) if taught else []
         for tries in probes:  # the second probe only where the expensive solver failed
             for point in tries:
@@ -359,10 +359,8 @@ class CorrectedCalibration(CalibrationLoop):
             self._single_fidelity(surrogate_trials)
             return
         while self.verified and self.dropped is None and self.verifications_left():
-            if self._settled():
-                break
             proposal = self._next()
-            if proposal is None:
+            if proposal is None or self._settled():  # the rule stops only what would run
                 break
             self._manage_radius(self._teach(proposal))  # a failed run: a smaller region
             if self.stalled is not None and (self._settled() or not self._expensive_round()):
@@ -378,16 +376,22 @@ class CorrectedCalibration(CalibrationLoop):
             short = "the corrected model's loop ended short of a verified local optimum"
             if not self._settled():
                 self._fall_back(self.stalled or short, near=True)
-        elif self.certify:
+        elif self.certify and not self._settled():
             self._certify()
+
+    def _rule_holds(self) -> bool:
+        """Whether the caller's rule (``enough``) holds at the best verified point."""
+        best = self.best()
+        return self.enough is not None and best is not None and self.enough(self, best) is not None
 
     def _carry(self) -> None:
         """Where a correction learned on another model missed at this model's first point
-        (``uncarried``, :func:`not_carried`): the built-in model corrected by the best
-        verified point's discrepancy alone (its runs at each condition group:
-        :meth:`_local_correction`) is fitted within the trust region around that point
-        (built-in runs) and its optimum verified — each round G expensive runs, the region
-        a quarter of the step after a round that gained under ``SETTLED``, up to
+        (``uncarried``, :func:`not_carried`): the built-in model corrected by the
+        discrepancy of the best and the two latest verified points alone (their runs at
+        each condition group: :meth:`_local_correction`) is fitted within the trust region
+        around the best point (built-in runs) and its optimum verified — each round G
+        expensive runs, the region a quarter of the step after a round that gained under
+        ``SETTLED``, up to
         ``CARRY_ROUNDS`` rounds or two such in a row — before the loop goes on from the
         best verified point. What the correction learned elsewhere extrapolates here
         (the current model's points lie on another manifold: an effect switched on moves
