@@ -176,9 +176,8 @@ class DiagnosisResult:
     diagnosis's rule stopped them, None where it did not: its misfit systematic at a
     3-fold lower RMSE too; a leader is then named only where it is decisive against that
     lower RMSE as well), ``confirmations`` (by effect; each stops at its first verified
-    point near the noise). ``solver_calls`` counts the expensive runs (where the current
-    model's calibration was run again to its end, a run both attempts used counts in each:
-    an upper bound).
+    point near the noise; a run two of them used counts in each). ``solver_calls`` counts
+    the distinct expensive runs.
 
     ``rmse_n``, ``heldout_rmse_n`` and ``noise_n`` are the current model's RMSE, its
     leave-one-test-out RMSE and the noise level; ``systematic`` whether the F-test
@@ -298,8 +297,8 @@ def _diagnose(
         the same inputs (:func:`~._calibrate.calibration_key`), where there is one; it is
         not run again (its loop, None then, is needed only with an external solver). With
         an external solver its expensive runs stop by :func:`_base_settled` unless
-        ``to_the_end``."""
-        return run_calibration(
+        ``to_the_end``. Its expensive runs' keys join ``made``."""
+        found, ran = run_calibration(
             spec,
             effects=chosen,
             plugins=plugins,
@@ -312,8 +311,12 @@ def _diagnose(
             reuse=start is None,
             enough=None if to_the_end else _base_settled,
         )
+        if isinstance(ran, CorrectedCalibration):
+            made.update(ran.runs.used)
+        return found, ran
 
     say = _Say(progress, f"{spec.name}/diagnose")
+    made: set[str] = set()  # the expensive runs' result keys, every calibration's
     fitted, loop = calibrated()
     problem = CalibrationProblem(spec, data, chosen)
     correction = _correction(loop, say)
@@ -381,6 +384,7 @@ def _diagnose(
                 "is run to its end and the candidates ranked again"
             )
             spent += fitted.solver_calls
+            made.update(refits.expensive_keys)
             for effect, calls in refits.confirm_calls.items():
                 confirmed_before[effect] = confirmed_before.get(effect, 0) + calls
             fitted, loop = calibrated(to_the_end=True)
@@ -417,7 +421,10 @@ def _diagnose(
     if loop is None:  # the recorded calibration stood (a replacement has its loop)
         result = replace(result, reused_calibration=name)
     if correction is not None:
-        result = _with_fidelity(result, refits, loop, fitted, skipped, spent, confirmed_before)
+        made.update(refits.expensive_keys)
+        result = _with_fidelity(
+            result, refits, loop, fitted, skipped, spent, confirmed_before, len(made)
+        )
     _attach_ladder(url, name, result, fitted.to_json())
     say(result.verdict)
     return result
@@ -506,11 +513,13 @@ def _with_fidelity(
     skipped: dict[str, str],
     spent: int,
     confirmed_before: Mapping[str, int],
+    total: int,
 ) -> DiagnosisResult:
     """The multi-fidelity record of a diagnosis, and its verdict's last words: what the
     expensive runs were spent on (``spent`` and ``confirmed_before``: those of the rounds
     before a calibration of the current model was run again to its end,
-    :func:`_decisive_against_lower`)."""
+    :func:`_decisive_against_lower`); ``total``: the distinct expensive runs of them all (a
+    run two calibrations used, such as a point a rerun verified again, counts once)."""
     assert isinstance(loop, CorrectedCalibration)
     kind = loop.problem.spec.solver
     record = fidelity_record(
@@ -537,10 +546,11 @@ def _with_fidelity(
         if loop.dropped is not None
         else ""
     )
-    total = spent + fitted.solver_calls + sum(confirmations.values())
     stopped = " (stopped early: its misfit is systematic beyond doubt)" if loop.settled else ""
     uses = [f"{spent + fitted.solver_calls} calibrating {model_label(refits.chosen)}{stopped}"]
     uses += [f"{n} confirming {effect}" for effect, n in confirmations.items()]
+    if spent + fitted.solver_calls + sum(confirmations.values()) > total:
+        uses.append("a run two of them used counted in each")
     verdict = result.verdict + (
         f" (candidates refitted on the built-in model corrected towards {kind}{dropped}"
         + (f"; confirmed on {kind}: {', '.join(refits.confirmed)}" if refits.confirmed else "")
@@ -796,6 +806,7 @@ class _Refits:
         self.expensive_calls = 0
         self.confirmed: list[str] = []
         self.confirm_calls: dict[str, int] = {}  # expensive runs of each confirmation
+        self.expensive_keys: set[str] = set()  # their result keys
         self._confirmation_low_runs = 0
 
     @property
@@ -978,6 +989,7 @@ class _Refits:
         assert loop is not None  # run: a recorded result is taken only with reuse
         self.expensive_calls += found.solver_calls
         self.confirm_calls[candidate.effect] = found.solver_calls
+        self.expensive_keys |= loop.runs.used
         if found.multi_fidelity is not None:
             self._confirmation_low_runs += found.multi_fidelity["low_fidelity_runs"]
         self.confirmed.append(candidate.effect)
