@@ -41,6 +41,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -322,7 +323,7 @@ def _diagnose(
     correction = _correction(loop, say)
     rebased: list[dict[str, Any]] = []
     spent = 0  # solver runs of the rounds before the last (a calibration replaced)
-    confirmed_before: dict[str, int] = {}  # expensive runs of those rounds' confirmations
+    confirmed_before: Counter[str] = Counter()  # expensive runs of those rounds' confirmations
     beaten = beaten_by(url, name, fitted.to_json())
     if beaten is not None and _stopped_short(loop):
         # stopped by the rule, it is known not to be at its best: an earlier point within the
@@ -385,8 +386,7 @@ def _diagnose(
             )
             spent += fitted.solver_calls
             made.update(refits.expensive_keys)
-            for effect, calls in refits.confirm_calls.items():
-                confirmed_before[effect] = confirmed_before.get(effect, 0) + calls
+            confirmed_before.update(refits.confirm_calls)
             fitted, loop = calibrated(to_the_end=True)
             correction = _correction(loop, say)
             names, skipped = _candidates(problem, chosen, candidates, fitted.params)
@@ -532,13 +532,12 @@ def _with_fidelity(
     record.pop("sentence")
     record["confirmed"] = list(refits.confirmed)
     record["skipped"] = [{"effect": e, "reason": r} for e, r in skipped.items()]
-    confirmations = dict(confirmed_before)
-    for effect, calls in refits.confirm_calls.items():
-        confirmations[effect] = confirmations.get(effect, 0) + calls
+    confirmations = Counter(confirmed_before)
+    confirmations.update(refits.confirm_calls)  # (keeps a count of 0, unlike ``+``)
     record["spent"] = {
         "calibration": spent + fitted.solver_calls,
         "calibration_stopped": loop.settled,
-        "confirmations": confirmations,
+        "confirmations": dict(confirmations),
     }
     dropped = (
         f", which the current model's calibration dropped after {loop.dropped_after} "
@@ -631,8 +630,7 @@ def _against_basin(
     0.047 N) and hardening fitted to 0.050 N: named all the same. (With an external
     solver ``better`` is the corrected built-in model's refit, the leader's figures its
     confirmation's.)"""
-    shift = bic(float(current.residual @ current.residual), n_points, len(current.theta))
-    shift -= bic(float(better.residual @ better.residual), n_points, len(better.theta))
+    shift = current.bic(n_points) - better.bic(n_points)
     against = replace(leader, delta_bic=leader.delta_bic + shift)
     return against.delta_bic if named(against, better.heldout_rmse) else None
 
@@ -848,7 +846,7 @@ class _Refits:
 
     def _entry(self, name: str) -> Candidate:
         n_points, current, fit = self.problem.n_points, self.current, self.refits[name]
-        base_bic = bic(float(current.residual @ current.residual), n_points, len(current.theta))
+        base_bic = current.bic(n_points)
         fit_rss = float(fit.residual @ fit.residual)
         return Candidate(
             effect=name,
@@ -995,7 +993,7 @@ class _Refits:
         self.confirmed.append(candidate.effect)
         verified = _verified_refit(problem, loop, self.noise)
         n_points = self.problem.n_points
-        base = bic(float(current.residual @ current.residual), n_points, len(current.theta))
+        base = current.bic(n_points)
         rss = float(verified.residual @ verified.residual)
         self.say(
             f"+ {candidate.effect} on the expensive solver: RMSE {verified.rmse:.4g} N, "
@@ -1096,6 +1094,10 @@ class _Refit:
     @property
     def rmse(self) -> float:
         return float(np.sqrt(np.mean(self.residual**2)))
+
+    def bic(self, n_points: int) -> float:
+        """Its BIC over ``n_points`` measured points."""
+        return bic(float(self.residual @ self.residual), n_points, len(self.theta))
 
 
 def _refit(task: tuple[Any, ...]) -> _Refit:

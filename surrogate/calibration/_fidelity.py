@@ -347,7 +347,7 @@ class CorrectedCalibration(CalibrationLoop):
         # current model, systematic beyond doubt: its correction only ranks the candidates,
         # and each leader's confirmation is taught where it lies)
         taught = fit is not None and not self.inherited and self.dropped is None
-        taught = taught and not (ran and self._rule_holds())
+        taught = taught and not (ran and self._rule() is not None)
         probes = self._probes(fit, ran) if taught else []
         for tries in probes:  # the second probe only where the expensive solver failed
             for point in tries:
@@ -379,10 +379,15 @@ class CorrectedCalibration(CalibrationLoop):
         elif self.certify and not self._settled():
             self._certify()
 
-    def _rule_holds(self) -> bool:
-        """Whether the caller's rule (``enough``) holds at the best verified point."""
+    def _verified_already(self, theta: np.ndarray) -> bool:
+        """Whether the expensive solver has verified ``theta`` (the same runs' keys)."""
+        keys = set(self.runs.keys(*self.problem.at_every_group(theta)))
+        return any(keys == set(point.keys) for point in self.verified)
+
+    def _rule(self) -> str | None:
+        """Why the caller's rule (``enough``) holds at the best verified point, or None."""
         best = self.best()
-        return self.enough is not None and best is not None and self.enough(self, best) is not None
+        return None if self.enough is None or best is None else self.enough(self, best)
 
     def _carry(self) -> None:
         """Where a correction learned on another model missed at this model's first point
@@ -391,12 +396,11 @@ class CorrectedCalibration(CalibrationLoop):
         each condition group: :meth:`_local_correction`) is fitted within the trust region
         around the best point (built-in runs) and its optimum verified — each round G
         expensive runs, the region a quarter of the step after a round that gained under
-        ``SETTLED``, up to
-        ``CARRY_ROUNDS`` rounds or two such in a row — before the loop goes on from the
-        best verified point. What the correction learned elsewhere extrapolates here
-        (the current model's points lie on another manifold: an effect switched on moves
-        the model states), while a discrepancy that changes slowly near the point is
-        nearly its value there: a Gauss–Newton step on the expensive residual with the
+        ``SETTLED``, up to ``CARRY_ROUNDS`` rounds or two such in a row — before the loop
+        goes on from the best verified point. What the correction learned elsewhere
+        extrapolates here (the current model's points lie on another manifold: an effect
+        switched on moves the model states), while a discrepancy that changes slowly near
+        the point is nearly its value there: a Gauss–Newton step on the expensive residual with the
         built-in model's slopes. Before, the expensive solver's own local phase went on
         from the first point: p·G runs a round (on the distorted solver's hidden tension,
         ``stiffened = 0.3``, 5 parameters and 3 groups, a confirmation spent its 30).
@@ -431,8 +435,7 @@ class CorrectedCalibration(CalibrationLoop):
             finally:
                 self._counted(model.runs)
             self.iterations += 1
-            keys = set(self.runs.keys(*self.problem.at_every_group(fit.theta)))
-            if any(keys == set(point.keys) for point in self.verified):
+            if self._verified_already(fit.theta):
                 return  # nothing new to verify
             step = _step(model, fit.theta, best)
             gained = self._teach(fit.theta) and self.verified[-1].rmse < (1 - SETTLED) * best.rmse
@@ -453,9 +456,8 @@ class CorrectedCalibration(CalibrationLoop):
         ``enough``: a diagnosis's, :mod:`._diagnose`): then nothing more runs on the
         expensive solver — no proposal, no expensive first-order test or local phase —
         and ``settled`` says why (the result's message too)."""
-        best = self.best()
-        if self.settled is None and self.enough is not None and best is not None:
-            self.settled = self.enough(self, best)
+        if self.settled is None:
+            self.settled = self._rule()
             if self.settled is not None:
                 self._say(f"{self.settled}: no more expensive runs")
         return self.settled is not None
@@ -633,8 +635,7 @@ class CorrectedCalibration(CalibrationLoop):
         finally:
             self._counted(model.runs)
         self.iterations += 1
-        keys = set(self.runs.keys(*self.problem.at_every_group(fit.theta)))
-        if any(keys == set(point.keys) for point in self.verified):
+        if self._verified_already(fit.theta):
             return None
         step = _step(model, fit.theta, best)
         self._proposal = (best.rmse, best.rmse - (at_best - fit.rmse), step)
