@@ -402,6 +402,36 @@ def test_a_corrected_models_optimum_is_converged_on_the_expensive_solvers_own_te
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("case", [0, 1])
+def test_the_certificate_differences_the_expensive_solver_where_the_curves_depend(
+    distorted_solver, log_runs, case
+):
+    """The default distortion leaves the curves hardly dependent on Tcoat at fixed D and
+    Mp (as the built-in ones): the certificate differences the expensive solver along D
+    and Mp only (2 × G runs, not 3 × G) and borrows the corrected model's slope along
+    Tcoat. Where that test held, the expensive solver's whole test at the same point holds
+    too (its runs are made here, outside the calibration's); a study whose curves do
+    depend on Tcoat (``thick``) takes the whole test (the test above)."""
+    from surrogate.calibration._calibrate import run_calibration
+    from surrogate.calibration._local import ResidualModel, optimum_test
+
+    path = _calibration_study(log_runs / "cal", BENDING, TRUTHS[case], seed=case)
+    uncertified, _ = run_calibration(path, progress=False, record=False, certify=False)
+    assert uncertified.multi_fidelity["optimum_tested_by"] == "corrected model"
+    certified, loop = run_calibration(path, progress=False, record=False)
+    assert certified.status == "converged", certified.message
+    mf = certified.multi_fidelity
+    assert mf["optimum_tested_by"] == "test-distorted"
+    assert mf["tested_along"] == {"own": "D, Mp", "corrected": "tcoat_mm at fixed D and Mp"}
+    assert certified.solver_calls == uncertified.solver_calls + 2 * len(BENDING)
+    assert "test-distorted's own along D, Mp (a Jacobian of 4 test-distorted runs)" in (
+        certified.message
+    )
+    whole = optimum_test(ResidualModel(loop.problem, loop.runs), loop.best().theta)
+    assert whole.converged, whole.message
+
+
+@pytest.mark.slow
 def test_a_calibration_says_where_the_expensive_solver_finished_only_after_a_retry(
     distorted_solver, log_runs
 ):

@@ -555,7 +555,16 @@ def _multi_fidelity(loop: CalibrationLoop, best: VerifiedPoint) -> dict[str, Any
     if fit is not None and loop.converged_at_best():
         tested_by = "corrected model" if loop.by_corrected_model(fit) else kind
     record["optimum_tested_by"] = tested_by
-    if tested_by == kind:
+    partly = loop.tested_partly(fit) if fit is not None and tested_by == kind else None
+    record["tested_along"] = None if partly is None else {"own": partly[0], "corrected": partly[1]}
+    if partly is not None:
+        own, borrowed, runs = partly
+        record["sentence"] += (
+            f". The first-order test that held is {kind}'s own along {own} (a Jacobian of "
+            f"{runs} {kind} runs) and the corrected model's along {borrowed}, on which the "
+            f"curves hardly depend: the intervals are {kind}'s"
+        )
+    elif tested_by == kind:
         record["sentence"] += (
             f". The first-order test that held is {kind}'s own (a Jacobian of "
             f"{loop.jacobian_runs} {kind} runs), so the intervals are {kind}'s"

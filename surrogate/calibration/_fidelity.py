@@ -76,7 +76,7 @@ from ._problem import CalibrationProblem
 from ._profile import Profile
 from ._statistics import SIGNIFICANCE
 
-__all__ = ["CorrectedCalibration", "CorrectedRuns", "CurveCorrection"]
+__all__ = ["CorrectedCalibration", "CorrectedRuns", "CurveCorrection", "PartlyExpensive"]
 
 CURVE_PRIOR_SD = 0.05  # asinh scale ≈ log F: before any expensive run, ~5 % apart
 CURVE_NOISE_SD = 1e-3  # the expensive curve's own scatter (mesh, increments): ~0.1 %
@@ -92,6 +92,43 @@ CARRY_ROUNDS = 6  # rounds of the locally corrected model where an inherited cor
 VERIFIED = (0.5, 2.0)  # the expensive misfit at an end: within this of the threshold, it stands
 # a caller's rule (the diagnosis's): why the best verified point settles its question, or None
 Enough = Callable[[CalibrationLoop, VerifiedPoint], str | None]
+
+
+class PartlyExpensive(ResidualModel):
+    """The expensive solver's residuals, with a Jacobian whose ``measured`` columns are its
+    own forward differences and whose other columns are ``borrowed``'s (the corrected
+    model's, on built-in runs): :meth:`CorrectedCalibration._determined_test`."""
+
+    def __init__(
+        self,
+        problem: CalibrationProblem,
+        runs: SolverRuns,
+        *,
+        budget: int | None,
+        borrowed: ResidualModel,
+        measured: Sequence[int],
+    ) -> None:
+        super().__init__(problem, runs, budget=budget)
+        self.borrowed, self.measured = borrowed, list(measured)
+
+    def differenced(self, x: np.ndarray) -> Sequence[int]:
+        return self.measured
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        jac = self.borrowed.jacobian(x)
+        jac[:, self.measured] = self.columns(x, self.measured)
+        return jac
+
+
+def flat_coordinates(jacobian: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """Whether the curves hardly depend on each fit coordinate (bool, (p,)): its whole
+    range (a unit) moves the residual by less than the 95 % threshold of a profile,
+    ``‖J e_j‖² ≤ t²·s²`` at a fit with residual ``residual`` and ``∂r/∂x`` ``jacobian``
+    (n, p) — with nothing re-fitted, so a coordinate that trades with another along a
+    valley (a held modulus's kink) is not one."""
+    dof = max(residual.size - jacobian.shape[1], 1)
+    threshold = determination_threshold(float(residual @ residual), dof)
+    return np.sum(jacobian**2, axis=0) <= threshold
 
 
 def _step(model: ResidualModel, theta: np.ndarray, best: VerifiedPoint) -> float:
@@ -215,6 +252,9 @@ class CorrectedCalibration(CalibrationLoop):
         self.inherited = bool(self.correction.n_runs)  # learned on another model
         self.uncarried: str | None = None  # why an inherited correction missed at the start
         self._carrying = False  # within :meth:`_carry`: its steps are not judged by the rules
+        # where the test that held differenced the expensive solver along the determined
+        # coordinates only: those, the free ones (the corrected model's slopes), its runs
+        self.partly: tuple[LocalFit, str, str, int] | None = None  # the fit too
 
     def smallest_budget(self) -> tuple[int, str]:
         """One verification by the expensive solver (a run at every condition group): at
@@ -346,9 +386,9 @@ class CorrectedCalibration(CalibrationLoop):
         # no probes where the caller's question is settled at the first point (a diagnosis's
         # current model, systematic beyond doubt: its correction only ranks the candidates,
         # and each leader's confirmation is taught where it lies)
-        taught = fit is not None and not self.inherited and self.dropped is None
+        taught = not self.inherited and self.dropped is None
         taught = taught and not (ran and self._rule() is not None)
-        probes = self._probes(fit, ran) if taught else []
+        probes = self._probes(fit, ran) if taught and fit is not None else []
         for tries in probes:  # the second probe only where the expensive solver failed
             for point in tries:
                 if not self.verifications_left() or self.dropped is not None:
@@ -464,17 +504,21 @@ class CorrectedCalibration(CalibrationLoop):
 
     def _certify(self) -> None:
         """Where the corrected model's first-order test is what held at the best verified
-        point: the expensive solver's own there, where the budget left holds its Jacobian —
-        the expensive local phase from that point (:meth:`_fall_back`), whose verdict
-        replaces the corrected model's. The corrected model's slopes are learned from a
-        few points: on CalculiX's *mid* curves (seed 1) its test promised ≤ 0.049 % at a
-        point 0.77 % off the truth's Mp, which fits 5.5 % better (CalculiX's own test
-        found 1.3 % there), and its Mp interval (±0.1 %) missed the truth; on *paper*
-        (seed 4) ±43 % missed it by 52 %. Where the budget does not hold the test,
-        ``converged`` stays the corrected model's and ``short`` says why (the message
-        too)."""
+        point: the expensive solver's own there. First on the directions the curves
+        determine (:meth:`_determined_test`, k·G runs for k of the p fit coordinates);
+        where that does not hold, or nothing is left free, the expensive local phase from
+        the best point (:meth:`_fall_back`: p·G runs a Jacobian, the k columns' from the
+        cache), whose verdict replaces the corrected model's. The corrected model's slopes
+        are learned from a few points: on CalculiX's *mid* curves (seed 1) its test
+        promised ≤ 0.049 % at a point 0.77 % off the truth's Mp, which fits 5.5 % better
+        (CalculiX's own test found 1.3 % there), and its Mp interval (±0.1 %) missed the
+        truth; on *paper* (seed 4) ±43 % missed it by 52 %. Where the budget does not hold
+        the test, ``converged`` stays the corrected model's and ``short`` says why (the
+        message too)."""
         fit = self.best_fit()
-        if fit is None or not self.by_corrected_model(fit) or not self._test_fits():
+        if fit is None or not self.by_corrected_model(fit):
+            return
+        if self._determined_test() or not self._test_fits():
             return
         self._fall_back(
             "the corrected model's first-order test held at the best verified point: the "
@@ -484,6 +528,76 @@ class CorrectedCalibration(CalibrationLoop):
         best = self.best()
         if best is not None and best.keys[0] not in self.corrections:  # a point it moved to
             self._measured(best, self._learn(best.theta, best.curves))
+
+    def _determined_test(self) -> bool:
+        """The expensive solver's first-order test at the best verified point with a
+        Jacobian whose columns are its own forward differences except along the fit
+        coordinates the curves hardly depend on: there the corrected model's
+        (:class:`PartlyExpensive`), k·G runs instead of p·G. Such a coordinate
+        (:func:`flat_coordinates`: a thin coat's Tcoat at fixed D and Mp) moves the
+        corrected model's curves by less than the 95 % threshold over its whole range, and
+        the correction has seen the expensive solver along it (the probes run at both ends
+        of the least determined direction, :meth:`_probes`). Only where the best point's
+        misfit is within the noise: a residual that is noise has no share along a smooth
+        change of that size worth the test's tolerance (its projection is ~σ times the
+        change: at most 0.05 × t·σ over the test's ±5 % box, a tenth of σ²), where a
+        systematic one may. True where the test held (``partly`` then names the
+        coordinates of each kind and the runs); every run teaches the correction, and a
+        better point the test verified is kept."""
+        best = self.best()
+        assert best is not None
+        if self.p_value_at(best) < SIGNIFICANCE:
+            return False
+        corrected = ResidualModel(self.problem, self.corrected_runs(self.correction))
+        try:
+            x = corrected.pin(best.theta)
+            free = flat_coordinates(corrected.jacobian(x), self.problem.residuals(best.curves))
+        except SolverFailed:
+            return False
+        finally:
+            self._counted(corrected.runs)
+        measured = [int(j) for j in np.flatnonzero(~free)]
+        if not measured or len(measured) == free.size or self.verifications_left() <= len(measured):
+            return False  # nothing free to borrow, or no run left for a step: the whole test
+        labels = corrected.coordinates.labels()
+        own = ", ".join(labels[j] for j in measured)
+        borrowed = [labels[j] for j in np.flatnonzero(free)]
+        self._say(
+            f"the expensive solver's first-order test along {own} (the curves hardly "
+            f"depend on {', '.join(borrowed)}: the corrected model's slopes there)"
+        )
+        model = PartlyExpensive(
+            self.problem, self.runs, budget=self.budget, borrowed=corrected, measured=measured
+        )
+        try:
+            test = optimum_test(model, best.theta)
+        except (SolverFailed, BudgetSpent) as failed:
+            self._say(f"the expensive first-order test did not finish: {failed}")
+            return False
+        finally:
+            self._learn_evaluated(model)
+            self._counted(corrected.runs)
+        self._say(f"at the best verified point (RMSE {best.rmse:.4g} N): {test.message}")
+        if not test.converged:
+            if test.better is not None:
+                better = next(
+                    c for theta, c in model.evaluated() if np.array_equal(theta, test.better)
+                )
+                self._verified_locally(test.better, better, model.keys(test.better))
+            return False
+        runs = len(measured) * self.problem.runs_per_point
+        self.partly = (test, own, ", ".join(borrowed), runs)
+        self._keep_fit(test)
+        self.fits = [f for f in self.fits if not self.by_corrected_model(f)]
+        return True
+
+    def tested_partly(self, fit: LocalFit) -> tuple[str, str, int] | None:
+        """Where ``fit`` is the test of :meth:`_determined_test`: the coordinates the
+        expensive solver differenced, those whose slopes were the corrected model's, and
+        the runs of its Jacobian; else None."""
+        if self.partly is None or self.partly[0] is not fit:
+            return None
+        return self.partly[1:]
 
     def by_corrected_model(self, fit: LocalFit) -> bool:
         """Whether ``fit`` is the corrected model's first-order test (not the expensive
@@ -728,10 +842,7 @@ class CorrectedCalibration(CalibrationLoop):
             self._say(f"the expensive first-order test did not finish: {failed}")
             return False
         finally:  # every run it made, whatever it found
-            taught = {key for point in self.verified for key in point.keys}
-            for theta, curves in residuals.evaluated():
-                if residuals.keys(theta)[0] not in taught:
-                    self._learn(theta, curves)
+            self._learn_evaluated(residuals)
         self._keep_fit(test)
         self._say(f"at the best verified point (RMSE {best.rmse:.4g} N): {test.message}")
         if test.converged or test.better is None:
@@ -750,6 +861,14 @@ class CorrectedCalibration(CalibrationLoop):
         self.stalled, self.radius, self.crawled = None, FIRST_ORDER_BOX, 0
         self._say(f"the corrected model proposes again within ±{self.radius:g}")
         return True
+
+    def _learn_evaluated(self, residuals: ResidualModel) -> None:
+        """Teach the correction every expensive run ``residuals`` made that no verified
+        point has taught it."""
+        taught = {key for point in self.verified for key in point.keys}
+        for theta, curves in residuals.evaluated():
+            if residuals.keys(theta)[0] not in taught:
+                self._learn(theta, curves)
 
     def _test_fits(self) -> bool:
         """Whether the budget left holds the expensive solver's first-order test: its

@@ -165,6 +165,17 @@ class FitCoordinates:
             for i, spec, value in self._moduli(shifted)
         )
 
+    def labels(self) -> list[str]:
+        """What each fit coordinate stands for: ``D`` and ``Mp`` in place of the moduli in
+        their section's coordinate, every other parameter's name."""
+        labels = list(self.space.names)
+        if self.coating:
+            for i, spec, _, _ in self._sections():
+                labels[i] = "D" if spec is self.e else "Mp"
+            if not self.declared:
+                labels[self.it] += " at fixed D and Mp"
+        return labels
+
     def from_unit(self, unit: np.ndarray) -> np.ndarray:
         """Fit coordinates of unit coordinates (inverse of :meth:`to_unit` inside the box)."""
         x = np.array(unit, dtype=float)
@@ -284,7 +295,11 @@ class ResidualModel:
         one of them past a bound from inside, :meth:`FitCoordinates.crosses_a_bound`, unless
         the inward step would leave the box: at such a corner the forward step stays); a
         column whose shifted run failed is zero."""
-        return self.columns(x, range(x.size))
+        return self.columns(x, self.differenced(x))
+
+    def differenced(self, x: np.ndarray) -> Sequence[int]:
+        """The columns :meth:`jacobian` takes by the full solver's differences: all."""
+        return range(x.size)
 
     def columns(self, x: np.ndarray, which: Sequence[int]) -> np.ndarray:
         """The columns ``which`` of :meth:`jacobian` at ``x`` (an evaluation each)."""
@@ -318,7 +333,7 @@ class ResidualModel:
         if self.budget is None:
             return
         x = self.coordinates.from_unit(unit)
-        points = [x] + [self.shifted(x, j)[0] for j in range(x.size)]
+        points = [x] + [self.shifted(x, j)[0] for j in self.differenced(x)]
         pending = [p for p in points if self._key(p) not in self._memo]
         if not pending:
             return
