@@ -8,12 +8,16 @@ from typing import Any
 
 def inside(value: float, combination: Mapping[str, Any] | None) -> bool | None:
     """``value`` within the stated 95 % interval of a combination (an entry of a
-    determination's ``combinations``); None where no interval is stated: no
-    determination (the calibration did not converge), or the curves do not determine
-    the combination at all."""
-    if combination is None or combination.get("low") is None:
+    determination's ``combinations``; a one-sided bound's open side is null and holds
+    everything on its side); None where no interval is stated: no determination (the
+    calibration did not converge), or the curves bound the combination from neither
+    side."""
+    if combination is None:
         return None
-    return combination["low"] <= value <= combination["high"]
+    low, high = combination.get("low"), combination.get("high")
+    if low is None and high is None:
+        return None
+    return (low is None or low <= value) and (high is None or value <= high)
 
 
 def mark(covered: bool | None) -> str:

@@ -89,6 +89,7 @@ CRAWL = 2  # verified proposals in a row, each gaining under ROUGH_CHI2 units of
 MIN_RADIUS = FIRST_ORDER_BOX / BACKTRACK[-1]  # the smallest step the first-order test tries
 VERIFY_RUNS = 10  # expensive runs at the profile ends, at most (on top of the calibration's)
 CARRY_ROUNDS = 6  # rounds of the locally corrected model where an inherited correction missed
+FLAT_SHARE = 0.25  # of the 95 % threshold: a coordinate whose range moves the RSS less is flat
 VERIFIED = (0.5, 2.0)  # the expensive misfit at an end: within this of the threshold, it stands
 # a caller's rule (the diagnosis's): why the best verified point settles its question, or None
 Enough = Callable[[CalibrationLoop, VerifiedPoint], str | None]
@@ -122,13 +123,15 @@ class PartlyExpensive(ResidualModel):
 
 def flat_coordinates(jacobian: np.ndarray, residual: np.ndarray) -> np.ndarray:
     """Whether the curves hardly depend on each fit coordinate (bool, (p,)): its whole
-    range (a unit) moves the residual by less than the 95 % threshold of a profile,
-    ``‖J e_j‖² ≤ t²·s²`` at a fit with residual ``residual`` and ``∂r/∂x`` ``jacobian``
-    (n, p) — with nothing re-fitted, so a coordinate that trades with another along a
-    valley (a held modulus's kink) is not one."""
+    range (a unit) moves the RSS by less than ``FLAT_SHARE`` of the 95 % threshold of a
+    profile, ``‖J e_j‖² ≤ FLAT_SHARE·t²·s²`` at a fit with residual ``residual`` and
+    ``∂r/∂x`` ``jacobian`` (n, p) — with nothing re-fitted, so a coordinate that trades
+    with another along a valley (a held modulus's kink) is not one. On the test solver's
+    coatings a thin coat's Tcoat at fixed D and Mp gives 0–0.27 of the threshold, D and
+    Mp 10⁵–10⁸, a Tcoat the curves do depend on (``thick = 0.05``) 800 and more."""
     dof = max(residual.size - jacobian.shape[1], 1)
     threshold = determination_threshold(float(residual @ residual), dof)
-    return np.sum(jacobian**2, axis=0) <= threshold
+    return np.sum(jacobian**2, axis=0) <= FLAT_SHARE * threshold
 
 
 def _step(model: ResidualModel, theta: np.ndarray, best: VerifiedPoint) -> float:
@@ -535,15 +538,16 @@ class CorrectedCalibration(CalibrationLoop):
         coordinates the curves hardly depend on: there the corrected model's
         (:class:`PartlyExpensive`), k·G runs instead of p·G. Such a coordinate
         (:func:`flat_coordinates`: a thin coat's Tcoat at fixed D and Mp) moves the
-        corrected model's curves by less than the 95 % threshold over its whole range, and
-        the correction has seen the expensive solver along it (the probes run at both ends
-        of the least determined direction, :meth:`_probes`). Only where the best point's
-        misfit is within the noise: a residual that is noise has no share along a smooth
-        change of that size worth the test's tolerance (its projection is ~σ times the
-        change: at most 0.05 × t·σ over the test's ±5 % box, a tenth of σ²), where a
-        systematic one may. True where the test held (``partly`` then names the
-        coordinates of each kind and the runs); every run teaches the correction, and a
-        better point the test verified is kept."""
+        corrected model's RSS by less than a quarter of the 95 % threshold over its whole
+        range, and the correction has seen the expensive solver along it (the probes run at
+        both ends of the least determined direction, :meth:`_probes`). Only where the best point's
+        misfit is within the noise: a residual that is noise projects onto a smooth change
+        ``Δr`` by ~σ·‖Δr‖, and over the test's ±5 % box ‖Δr‖ ≤ 0.05·t·σ/2, so a slope of
+        the expensive solver's that size which the corrected model missed hides a gain of
+        ~0.05·t·σ² (≈ 0.1 σ² at one standard deviation, 0.2 σ² at two, against the test's
+        tolerance of 0.25 σ²), where a systematic residual may share far more. True where
+        the test held (``partly`` then names the coordinates of each kind and the runs);
+        every run teaches the correction, and a better point the test verified is kept."""
         best = self.best()
         assert best is not None
         if self.p_value_at(best) < SIGNIFICANCE:
@@ -551,17 +555,17 @@ class CorrectedCalibration(CalibrationLoop):
         corrected = ResidualModel(self.problem, self.corrected_runs(self.correction))
         try:
             x = corrected.pin(best.theta)
-            free = flat_coordinates(corrected.jacobian(x), self.problem.residuals(best.curves))
+            flat = flat_coordinates(corrected.jacobian(x), self.problem.residuals(best.curves))
         except SolverFailed:
             return False
         finally:
             self._counted(corrected.runs)
-        measured = [int(j) for j in np.flatnonzero(~free)]
-        if not measured or len(measured) == free.size or self.verifications_left() <= len(measured):
-            return False  # nothing free to borrow, or no run left for a step: the whole test
+        measured = [int(j) for j in np.flatnonzero(~flat)]
+        if not measured or len(measured) == flat.size or self.verifications_left() <= len(measured):
+            return False  # nothing flat to borrow, or no run left for a step: the whole test
         labels = corrected.coordinates.labels()
         own = ", ".join(labels[j] for j in measured)
-        borrowed = [labels[j] for j in np.flatnonzero(free)]
+        borrowed = [labels[j] for j in np.flatnonzero(flat)]
         self._say(
             f"the expensive solver's first-order test along {own} (the curves hardly "
             f"depend on {', '.join(borrowed)}: the corrected model's slopes there)"
