@@ -493,8 +493,8 @@ def _result(loop: CalibrationLoop, effects: Sequence[str], url: str) -> Calibrat
     multi = _multi_fidelity(loop, best)
     if multi is not None:
         message += multi.pop("sentence")
-        if misfit == "systematic" and isinstance(loop, CorrectedCalibration):
-            message += loop.basin_caveat()
+        if isinstance(loop, CorrectedCalibration) and misfit is not None:
+            message += loop.basin_caveat(misfit == "systematic")
     return replace(
         result,
         message=message,
