@@ -387,6 +387,7 @@ def test_a_corrected_models_optimum_is_converged_on_the_expensive_solvers_own_te
     certified, loop = run_calibration(path, progress=False, record=False)
     assert certified.status == "converged", certified.message
     assert certified.multi_fidelity["optimum_tested_by"] == "test-distorted"
+    assert certified.multi_fidelity["tested_along"] is None  # Tcoat matters: the whole test
     assert "may miss" not in certified.message
     assert f"test that held is test-distorted's own (a Jacobian of {jacobian}" in (
         certified.message

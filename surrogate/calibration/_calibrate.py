@@ -562,7 +562,7 @@ def _multi_fidelity(loop: CalibrationLoop, best: VerifiedPoint) -> dict[str, Any
         record["sentence"] += (
             f". The first-order test that held is {kind}'s own along {own} (a Jacobian of "
             f"{runs} {kind} runs) and the corrected model's along {borrowed}, on which the "
-            f"curves hardly depend: the intervals are {kind}'s"
+            f"curves hardly depend: the intervals are {kind}'s along {own}"
         )
     elif tested_by == kind:
         record["sentence"] += (

@@ -258,6 +258,9 @@ class CorrectedCalibration(CalibrationLoop):
         # where the test that held differenced the expensive solver along the determined
         # coordinates only: those, the free ones (the corrected model's slopes), its runs
         self.partly: tuple[LocalFit, str, str, int] | None = None  # the fit too
+        self.probed = False  # whether a probe along the least determined direction was taught
+        self._learned: set[str] = set()  # the first result key of each point taught (_learn)
+        self.first_point: VerifiedPoint | None = None  # the corrected model's optimum, verified
 
     def smallest_budget(self) -> tuple[int, str]:
         """One verification by the expensive solver (a run at every condition group): at
@@ -384,6 +387,7 @@ class CorrectedCalibration(CalibrationLoop):
             return
         theta, fit = start
         ran = self._teach(theta)  # a point the expensive solver cannot run is left out
+        self.first_point = self.verified[-1] if ran else None
         if self.uncarried is not None:
             self._carry()
         # no probes where the caller's question is settled at the first point (a diagnosis's
@@ -397,6 +401,7 @@ class CorrectedCalibration(CalibrationLoop):
                 if not self.verifications_left() or self.dropped is not None:
                     break
                 if self._teach(point):
+                    self.probed = True
                     break
         if not self.verified:  # nothing verified to go on from
             self._single_fidelity(surrogate_trials)
@@ -539,8 +544,9 @@ class CorrectedCalibration(CalibrationLoop):
         (:class:`PartlyExpensive`), k·G runs instead of p·G. Such a coordinate
         (:func:`flat_coordinates`: a thin coat's Tcoat at fixed D and Mp) moves the
         corrected model's RSS by less than a quarter of the 95 % threshold over its whole
-        range, and the correction has seen the expensive solver along it (the probes run at
-        both ends of the least determined direction, :meth:`_probes`). Only where the best point's
+        range, and the correction has been taught by the expensive runs around the point —
+        a probe along the least determined direction among them (:meth:`_probes`; without
+        one, the whole test). Only where the best point's
         misfit is within the noise: a residual that is noise projects onto a smooth change
         ``Δr`` by ~σ·‖Δr‖, and over the test's ±5 % box ‖Δr‖ ≤ 0.05·t·σ/2, so a slope of
         the expensive solver's that size which the corrected model missed hides a gain of
@@ -550,14 +556,17 @@ class CorrectedCalibration(CalibrationLoop):
         every run teaches the correction, and a better point the test verified is kept."""
         best = self.best()
         assert best is not None
-        if self.p_value_at(best) < SIGNIFICANCE:
+        if not self.probed or self.p_value_at(best) < SIGNIFICANCE:
             return False
         corrected = ResidualModel(self.problem, self.corrected_runs(self.correction))
         try:
             x = corrected.pin(best.theta)
             flat = flat_coordinates(corrected.jacobian(x), self.problem.residuals(best.curves))
-        except SolverFailed:
-            return False
+            # a difference the built-in solver could not run is a zero column, not a flat one
+            ran = [
+                corrected.evaluate(corrected.shifted(x, j)[0])[1] is not None for j in range(x.size)
+            ]
+            flat &= np.array(ran, dtype=bool)
         finally:
             self._counted(corrected.runs)
         measured = [int(j) for j in np.flatnonzero(~flat)]
@@ -867,23 +876,29 @@ class CorrectedCalibration(CalibrationLoop):
         return True
 
     def _learn_evaluated(self, residuals: ResidualModel) -> None:
-        """Teach the correction every expensive run ``residuals`` made that no verified
-        point has taught it."""
-        taught = {key for point in self.verified for key in point.keys}
+        """Teach the correction every expensive run ``residuals`` made (:meth:`_learn`:
+        once a point)."""
         for theta, curves in residuals.evaluated():
-            if residuals.keys(theta)[0] not in taught:
-                self._learn(theta, curves)
+            self._learn(theta, curves)
 
     def _test_fits(self) -> bool:
-        """Whether the budget left holds the expensive solver's first-order test: its
-        Jacobian, p verifications (a test that holds needs no step; one that does not
+        """Whether the budget left holds the expensive solver's first-order test at the best
+        verified point: the runs of its Jacobian not made yet (p·G, less the columns a
+        partial test differenced there; a test that holds needs no step, one that does not
         needs at least one more); else ``short`` says why it is not started (on
         CalculiX's *paper* curves 4 runs of a Jacobian that could not finish were 12
         minutes for nothing)."""
-        needed = len(self.problem.space)
+        best = self.best()
+        assert best is not None
+        residuals = ResidualModel(self.problem, self.runs, budget=self.budget)
+        try:  # the runs still to make: a column the partial test differenced is cached
+            residuals.check_jacobian_fits(residuals.coordinates.to_unit(residuals.pin(best.theta)))
+            return True
+        except BudgetSpent:
+            pass
+        if self.short is not None:
+            return False
         left = self.verifications_left()
-        if left >= needed or self.short is not None:
-            return left >= needed
         self.short = (
             f"{left * self.problem.runs_per_point} expensive run(s) left, short of the "
             f"{self.jacobian_runs} of the expensive solver's first-order test's Jacobian"
@@ -946,15 +961,18 @@ class CorrectedCalibration(CalibrationLoop):
         return curves_array, np.array(stds), self.problem.rmse(curves_array)
 
     def _learn(self, theta: np.ndarray, curves: np.ndarray) -> list[dict[str, Any] | None]:
-        """Teach the correction the expensive runs at ``theta``, curves (G, A); the built-in
-        results of the same runs."""
-        return self._taught(self.correction, theta, curves)
+        """Teach the correction the expensive runs at ``theta``, curves (G, A), once (a
+        point taught again adds nothing); the built-in results of the same runs."""
+        key = self.runs.keys(*self.problem.at_every_group(theta))[0]
+        learn = key not in self._learned
+        self._learned.add(key)
+        return self._taught(self.correction if learn else None, theta, curves)
 
     def _taught(
-        self, correction: CurveCorrection, theta: np.ndarray, curves: np.ndarray
+        self, correction: CurveCorrection | None, theta: np.ndarray, curves: np.ndarray
     ) -> list[dict[str, Any] | None]:
-        """Teach ``correction`` the expensive curves (G, A) at ``theta``; the built-in
-        results of the same runs (cached after the first time)."""
+        """Teach ``correction`` (None: none) the expensive curves (G, A) at ``theta``; the
+        built-in results of the same runs (cached after the first time)."""
         names = self.problem.space.names
         plain = self.corrected_runs(None)
         thetas, groups = self.problem.at_every_group(theta)
@@ -964,8 +982,9 @@ class CorrectedCalibration(CalibrationLoop):
         for g, (low, key) in enumerate(zip(lows, plain.keys(thetas, groups), strict=True)):
             if low is None:
                 continue
-            inputs = self.problem.inputs(dict(zip(names, theta, strict=True)), g)
-            correction.learn(inputs, low.curve, curves[g])
+            if correction is not None:
+                inputs = self.problem.inputs(dict(zip(names, theta, strict=True)), g)
+                correction.learn(inputs, low.curve, curves[g])
             results.append(plain.cache.get(key))
         return results
 
@@ -1086,7 +1105,7 @@ class CorrectedCalibration(CalibrationLoop):
             return
 
     def basin_caveat(self, systematic: bool) -> str:
-        """What a converged point cannot rule out here, and what would tell: a
+        """What the best point of a calibration cannot rule out here, and what would tell: a
         ``systematic`` misfit may be a basin of the expensive solver's that the built-in
         model lacks (seen on CalculiX-made curves of a mid coating: a local optimum of
         ccx's misfit at 3.3 × the truth's RMSE, Tcoat 0.042 mm against 0.02). A misfit
@@ -1121,12 +1140,15 @@ class CorrectedCalibration(CalibrationLoop):
         )
 
     def prior_miss(self) -> tuple[float, float, float] | None:
-        """Where the corrected model's first verified point (its global optimum, before any
-        expensive run taught it) missed by more than the best verified RMSE: that point's
-        verified and predicted RMSE and the best's; else None."""
-        best = self.best()
-        first = next((p for p in self.verified if p.predicted is not None), None)
-        if best is None or first is None or self.inherited or first.predicted is None:
+        """Where the corrected model's optimum (before any expensive run taught it), the
+        first point verified, missed by more than the best verified RMSE: that point's
+        verified and predicted RMSE and the best's; else None (also where the expensive
+        solver could not run it, the correction was inherited, or the single-fidelity loop
+        took over)."""
+        best, first = self.best(), self.first_point
+        if best is None or first is None or self.inherited or self.single_fidelity:
+            return None
+        if first.predicted is None or not np.isfinite(first.predicted):
             return None
         if first.rmse - first.predicted <= best.rmse:
             return None
