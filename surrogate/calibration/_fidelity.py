@@ -594,10 +594,7 @@ class CorrectedCalibration(CalibrationLoop):
         self._say(f"at the best verified point (RMSE {best.rmse:.4g} N): {test.message}")
         if not test.converged:
             if test.better is not None:
-                better = next(
-                    c for theta, c in model.evaluated() if np.array_equal(theta, test.better)
-                )
-                self._verified_locally(test.better, better, model.keys(test.better))
+                self._keep_better(model, test.better)
             return False
         runs = len(measured) * self.problem.runs_per_point
         self.partly = (test, own, ", ".join(borrowed), runs)
@@ -861,9 +858,7 @@ class CorrectedCalibration(CalibrationLoop):
         self._say(f"at the best verified point (RMSE {best.rmse:.4g} N): {test.message}")
         if test.converged or test.better is None:
             return False
-        better = next(c for theta, c in residuals.evaluated() if np.array_equal(theta, test.better))
-        self._verified_locally(test.better, better, residuals.keys(test.better))
-        point = self.verified[-1]
+        point = self._keep_better(residuals, test.better)
         self._say(
             f"verified: RMSE {point.rmse:.4g} N (the expensive solver's step), "
             f"{self.runs.calls} expensive runs"
@@ -875,6 +870,13 @@ class CorrectedCalibration(CalibrationLoop):
         self.stalled, self.radius, self.crawled = None, FIRST_ORDER_BOX, 0
         self._say(f"the corrected model proposes again within ±{self.radius:g}")
         return True
+
+    def _keep_better(self, residuals: ResidualModel, theta: np.ndarray) -> VerifiedPoint:
+        """Record the better point an expensive first-order test verified at ``theta`` (its
+        runs made by ``residuals``) as a verified point."""
+        curves = next(c for t, c in residuals.evaluated() if np.array_equal(t, theta))
+        self._verified_locally(theta, curves, residuals.keys(theta))
+        return self.verified[-1]
 
     def _learn_evaluated(self, residuals: ResidualModel) -> None:
         """Teach the correction every expensive run ``residuals`` made (:meth:`_learn`:
