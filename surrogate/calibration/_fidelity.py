@@ -255,9 +255,10 @@ class CorrectedCalibration(CalibrationLoop):
         self.inherited = bool(self.correction.n_runs)  # learned on another model
         self.uncarried: str | None = None  # why an inherited correction missed at the start
         self._carrying = False  # within :meth:`_carry`: its steps are not judged by the rules
-        # where the test that held differenced the expensive solver along the determined
-        # coordinates only: those, the free ones (the corrected model's slopes), its runs
-        self.partly: tuple[LocalFit, str, str, int] | None = None  # the fit too
+        # where the test that held differenced the expensive solver along the coordinates the
+        # curves depend on only (:meth:`_determined_test`): that test's fit, those
+        # coordinates, the flat ones (the corrected model's slopes) and its Jacobian's runs
+        self.partly: tuple[LocalFit, str, str, int] | None = None
         self._learned: set[str] = set()  # the first result key of each point taught (_learn)
         self.first_point: VerifiedPoint | None = None  # the corrected model's optimum, verified
 
