@@ -189,8 +189,17 @@ class FitCoordinates:
 
     def canonical(self, x: np.ndarray) -> np.ndarray:
         """``x`` moved onto the points that stand for themselves: where Ecoat (Scoat) is
-        held at its bound, the log D (log Mp) coordinate that holds it exactly there."""
-        return np.clip(self.from_unit(self.to_unit(x)), 0.0, 1.0)
+        held at its bound, the log D (log Mp) coordinate that holds it exactly there; every
+        other coordinate as it is, to the bit. (The round trip through the unit coordinates
+        moved 12 % of pinned points by an ulp, none of them held: a local fit started at such
+        a verified point — :meth:`ResidualModel.pin` — ran its runs again.)"""
+        x = np.clip(np.asarray(x, dtype=float), 0.0, 1.0)
+        if not self.coating:
+            return x
+        held = [i for i, spec, value in self._moduli(x) if not spec.low <= value <= spec.high]
+        if held:
+            x[held] = np.clip(self.from_unit(self.to_unit(x)), 0.0, 1.0)[held]
+        return x
 
 
 class ResidualModel:
