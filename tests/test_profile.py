@@ -294,11 +294,13 @@ def test_a_fit_held_exactly_at_a_bound_leaves_the_plastic_moment_open_above(
     step the range held ended the side — "Mp 4.28–11.5", where the curves bound it from below
     only. That farthest re-fit under the threshold now takes a fresh Jacobian first (ρ −0.04)."""
 
+    inexact = ParameterSpec.from_unit
+
     def exact(spec, unit):
         unit = np.asarray(unit, dtype=float)
-        along = np.log(spec.low) + unit * spec.span if spec.log else spec.low + unit * spec.span
-        values = np.exp(along) if spec.log else along
-        values = np.where(unit == 0.0, spec.low, np.where(unit == 1.0, spec.high, values))
+        values = np.where(
+            unit == 0.0, spec.low, np.where(unit == 1.0, spec.high, inexact(spec, unit))
+        )
         return values[()] if values.ndim == 0 else values
 
     monkeypatch.setattr(ParameterSpec, "from_unit", exact)

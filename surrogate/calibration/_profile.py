@@ -420,10 +420,8 @@ class Profiler:
         at +0.52 and +0.78 in log Mp kept Tcoat 0.04 % off the fit's and D with it, at ρ 0.75
         each, and Mp was stated two-sided where the curves bound it from below only)."""
         return (
-            over.held
-            and (quantity.name, sign) not in ALWAYS_SEEN
+            _range_holds(quantity, sign, under, over)
             and under.ratio >= RANGED
-            and _stretch(under, over)
             and not _flat(under, unders)
         )
 
@@ -644,21 +642,21 @@ class Profiler:
         a coordinate): near the threshold, a re-fit whose Jacobian only Broyden's rule
         updated along the side can stop far from settled — cover-107 of 240 stated
         ``k_s ≤ 0.00938`` at ρ 1.14 where a full constrained fit gives 0.32, and its truth
-        0.00939 lies at 0.51. A Jacobian the budget cannot finish is not begun: ``found``
-        stands."""
+        0.00939 lies at 0.51. Where the budget cannot finish it (a Jacobian that would not
+        fit is not begun), ``found`` stands."""
         try:
             self.model.check_jacobian_fits(self.model.coordinates.to_unit(found.x))
+            jac = self.model.jacobian(found.x)
+            step = _tangent_step(
+                self.model.residual(found.x), jac, self._gradient(quantity, found.x), found.x
+            )
+            x = self._onto(quantity, found.x + step, target, jac)
+            best, ratio, jac = self._descend(quantity, target, x, found.x, jac, OVER_EVALUATIONS)
+            if ratio >= found.ratio:
+                return found
+            return self._step(quantity, q0, sign, best, jac)
         except BudgetSpent:
             return found
-        jac = self.model.jacobian(found.x)
-        step = _tangent_step(
-            self.model.residual(found.x), jac, self._gradient(quantity, found.x), found.x
-        )
-        x = self._onto(quantity, found.x + step, target, jac)
-        best, ratio, jac = self._descend(quantity, target, x, found.x, jac, OVER_EVALUATIONS)
-        if ratio >= found.ratio:
-            return found
-        return self._step(quantity, q0, sign, best, jac)
 
     def _descend(
         self,
@@ -782,9 +780,16 @@ def _ranged(
     with Scoat at its bound, had been stated free in its range; nor a rise the curves make:
     the plastic moment of a coat a 5 mm test barely yields, ρ 0.22 at −5.1 % and 12.9 at
     −5.6 % (a range holding both), is bounded by the curves."""
+    return _range_holds(quantity, sign, under, over) and _flat(under, earlier)
+
+
+def _range_holds(quantity: Quantity, sign: float, under: _Step, over: _Step) -> bool:
+    """Whether a range holds the step ``over`` beyond a stretch of re-fits under the
+    threshold, on a side the curves do not see at every coat: what :func:`_ranged` asks
+    before the misfit's flatness."""
     if (quantity.name, sign) in ALWAYS_SEEN or not over.held:
         return False
-    return _stretch(under, over) and _flat(under, earlier)
+    return _stretch(under, over)
 
 
 def _stretch(under: _Step, beyond: _Step) -> bool:
