@@ -107,7 +107,7 @@ def test_the_report_of_a_run_opens_offline_in_chromium(ran, tmp_path):
     assert result.status == "verified"
     for shown in (
         str(study.resolve()),
-        "rod-1",  # the solver's version, with its verification figures
+        "rod-2",  # the solver's version, with its verification figures
         "0.083 %",
         "bending_length_mm",
         f"{chosen['ecoat_gpa']:.4g}",

@@ -11,7 +11,7 @@ from .._lazy import lazy_attributes
 from ._features import F60_ANGLE_DEG, CurveFeatures, curve_features
 from ._section import bending_stiffness, plastic_moment
 
-SOLVER_VERSION = "rod-1"
+SOLVER_VERSION = "rod-2"
 """Bump whenever a change to the solver changes its results (it keys the cache)."""
 
 _LAZY = {

@@ -1222,9 +1222,10 @@ def _march(
 ) -> Iterator[tuple[_Evaluation | None, _Configuration]]:
     """Rotate the clamp through ``angles_rad``; yield each converged state.
 
-    Each interval is one load step, bisected when Newton fails; the
-    predictor extrapolates the last steps (see :class:`_Predictor`). ``None``
-    stands for the unloaded state at 0°.
+    Each interval is one load step, bisected when Newton fails; the last state
+    stands where it is still the equilibrium (:func:`_held`), else the predictor
+    extrapolates the last steps (see :class:`_Predictor`). ``None`` stands for
+    the unloaded state at 0°.
     """
     n = problem.N
     current = problem.configuration(np.zeros(n), 0.0, problem.section.initial_state(n), 0.0)
@@ -1238,8 +1239,10 @@ def _march(
         while theta_done < target - 1e-12:
             theta = min(target, theta_done + span / substeps)
             dtheta = theta - theta_done
-            guess_psi, guess_lam = predictor.guess(current.psi, current.lam, dtheta)
-            ev = _step(problem, guess_psi, guess_lam, theta, current)
+            ev = _held(problem, last, current, theta)
+            if ev is None:
+                guess_psi, guess_lam = predictor.guess(current.psi, current.lam, dtheta)
+                ev = _step(problem, guess_psi, guess_lam, theta, current)
             if ev is None:
                 substeps *= 2
                 if substeps > 2**_MAX_BISECTIONS:
@@ -1255,6 +1258,26 @@ def _march(
             theta_done = theta
             last = ev
         yield last, current
+
+
+def _held(
+    problem: _Problem, last: _Evaluation | None, current: _Configuration, theta: float
+) -> _Evaluation | None:
+    """The last converged state where it is the equilibrium at ``theta`` too (on the
+    probe), else None.
+
+    Where a plastic hinge at the clamp takes the whole rotation, nothing else moves: the
+    last state is the equilibrium at the next angle as well, and the path stays there.
+    Newton's iterations from the predictor's extrapolation can instead end in another
+    equilibrium that the friction at the probe allows — the strip wrapped around it under
+    end tension, the contact point near a node: coats 10⁻¹² apart in Scoat gave curves
+    0.7 N apart past the hinge (``benchmarks/smoothness.py``).
+    """
+    if last is None or not problem.active:
+        return None
+    preferred = None if last.info[_INFO_ON_VERTEX] else int(last.info[_INFO_SEGMENT])
+    ev = problem.evaluate(current.psi, current.lam, theta, current, preferred)
+    return ev if ev.converged and ev.lam >= 0.0 else None
 
 
 def _step(

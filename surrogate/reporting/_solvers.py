@@ -20,7 +20,7 @@ __all__ = ["VERIFIED", "SolverFacts", "solver_facts"]
 Figure = tuple[str, str, str]  # (check, measured, target)
 
 VERIFIED: dict[tuple[str, str], tuple[str, tuple[Figure, ...]]] = {
-    ("builtin", "rod-1"): (
+    ("builtin", "rod-2"): (
         "benchmarks/solver.py against the references of design.md §3 (tests/reference), "
         "2-core AMD EPYC",
         (
