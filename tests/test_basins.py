@@ -94,13 +94,17 @@ def test_a_calibration_in_another_basin_searches_and_reaches_the_noise_floor(
     assert result.params["anisotropy.a_s"] == pytest.approx(0.7, abs=0.02)
     basins = result.basins
     assert basins["searched"] and basins["starts"] >= 1 and basins["solver_calls"] > 0
-    # the first optimum is reported as the next one, with where it lies
+    # the first optimum is reported as the next one, with where it lies: the basin where
+    # no weft coat yields, a_s far above the truth's 0.7 — anywhere there, the misfit is
+    # flat in a_s (1.37 and 1.75 with solver rod-1, 1.00 with rod-2), so the parameters
+    # it differs in most are those the local phase left farthest from the best fit's
     assert len(basins["optima"]) >= 2
-    first = basins["optima"][0]
+    first, other = basins["optima"][:2]
     assert first["rmse_n"] == pytest.approx(result.rmse_n)
-    assert basins["optima"][1]["rmse_n"] > 10 * result.noise_n
-    assert "anisotropy.a_s" in basins["optima"][1]["where"]
-    assert "best of" in result.message and "× noise at anisotropy.a_s" in result.message
+    assert other["rmse_n"] > 10 * result.noise_n
+    assert other["params"]["anisotropy.a_s"] > 0.9
+    assert other["where"] and other["where"].split()[0] in other["params"]
+    assert "best of" in result.message and f"× noise at {other['where']}" in result.message
     assert json.loads(json.dumps(result.to_json()))["basins"] == basins
 
 
