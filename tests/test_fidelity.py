@@ -472,18 +472,26 @@ def test_calibration_goes_on_where_the_expensive_solver_fails(distorted_solver, 
     """An expensive solver that stops short for coats just thicker than the truth's (as
     ccx's coarse mesh does for thick coats): the built-in valley's optimum, probes and
     proposals there fail; the calibration still reaches the noise floor, ``converged``,
-    in at most 30 expensive runs — failed runs counted."""
+    in at most 36 expensive runs — failed runs counted. (30 until the built-in solver
+    ``rod-2``: since, the first case reaches the corrected model's optimum in 22 runs, where
+    30 left room to start the expensive solver's own first-order test, 6 runs, but not to
+    finish it — the test found a step 0.1 % lower — and ended ``budget_exhausted``; with
+    36 it is certified on that test. Before, it ended in 26 runs ``converged`` on the
+    corrected model's test alone, 4 runs left. The others take 30, 8 and 28 runs.)"""
     index, limit, seed = case
     truth = TRUTHS[index]
     settings = f"thick = 0.15\nfail_above_tcoat_mm = {limit}"
     path = _calibration_study(log_runs / "cal", BENDING, truth, seed=seed, settings=settings)
+    path.write_text(
+        path.read_text().replace("calibration_solver_calls = 30", "calibration_solver_calls = 36")
+    )
     floor = _truth_rmse(path, truth, {"thick": 0.15, "fail_above_tcoat_mm": limit})
     before = _expensive_runs(log_runs)
     result = surrogate.calibrate(path, progress=False)
     assert result.status == "converged" and result.misfit == "within the noise", result.message
     assert result.rmse_n <= 1.05 * floor and result.params["tcoat_mm"] <= limit
     assert _spent(result) == _expensive_runs(log_runs) - before
-    assert result.solver_calls <= 30
+    assert result.solver_calls <= 36
     assert result.multi_fidelity["dropped"] is None
 
 
