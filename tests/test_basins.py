@@ -108,6 +108,28 @@ def test_a_calibration_in_another_basin_searches_and_reaches_the_noise_floor(
     assert json.loads(json.dumps(result.to_json()))["basins"] == basins
 
 
+def test_a_systematic_misfit_the_budget_left_no_search_for_says_so(tmp_path):
+    """cover-236 of the coverage benchmark (tension in the truth and the model, one bending
+    length, study seed 0): its first local optimum, reached with the whole budget of 200
+    runs, misses the curves systematically (1.21 × the noise, p = 0.0013; the truth fits
+    far better, k_s 0.0097 against 0.019). The search for other basins had no run left,
+    yet the message said they "were searched (0 start(s), 0 solver runs): no other local
+    optimum found". It now says the budget left none, and what to raise (with 400 runs this
+    set reaches 0.95 × the noise)."""
+    from surrogate.calibration._basins import UNAFFORDABLE
+    from surrogate.calibration._synthetic import coverage_sets
+
+    case = next(c for c in coverage_sets(240) if c["name"] == "cover-236")
+    path = write_calibration_study(tmp_path, case, seed=case["study_seed"])
+    result = surrogate.calibrate(path, progress=False, record=False)
+    assert result.misfit == "systematic" and result.solver_calls == 200, result.message
+    assert not result.basins["searched"] and result.basins["reason"] == UNAFFORDABLE
+    assert "were searched" not in result.message
+    assert f"systematic, but {UNAFFORDABLE}: another may fit better (raise --budget)" in (
+        result.message
+    )
+
+
 def test_a_calibration_within_the_noise_does_not_search(tmp_path):
     result = surrogate.calibrate(write_calibration_study(tmp_path, CASE, seed=1), progress=False)
     assert result.status == "converged" and result.misfit == "within the noise"

@@ -32,6 +32,7 @@ __all__ = [
     "BASIN_SHARE",
     "SAME_OPTIMUM_UNIT",
     "SCREEN_EVALUATIONS",
+    "UNAFFORDABLE",
     "BasinSearch",
     "Start",
     "distinct_optima",
@@ -42,6 +43,8 @@ __all__ = [
 ]
 
 BASIN_SHARE = 0.5  # the share of the calibration's budget the search may spend, at most
+# the reason of a search the budget left no run for, and the message's words for it
+UNAFFORDABLE = "the budget left no run to search other basins"
 # an effect parameter's starts: these points of its range (unit coordinates) and its off value
 EFFECT_GRID = (0.05, 0.25, 0.5, 0.75, 0.95)
 NEAR_UNIT = 0.1  # a start within this of a known optimum in every coordinate: not a new one
@@ -80,9 +83,15 @@ class BasinSearch:
         return asdict(self)
 
     def sentence(self, noise: float) -> str:
-        """What the search found, for the calibration's message ("" where it did not run)."""
+        """What the search found, for the calibration's message ("" where it did not run,
+        but for a systematic misfit whose search the budget left no run for)."""
         if not self.searched:
-            return ""
+            if self.reason != UNAFFORDABLE:
+                return ""
+            return (
+                f"; the first local optimum's misfit was systematic, but {UNAFFORDABLE}: "
+                "another may fit better (raise --budget)"
+            )
         searched = (
             "; the first local optimum's misfit was systematic, so other basins were searched "
             f"({self.starts} start(s), {self.solver_calls} solver runs)"

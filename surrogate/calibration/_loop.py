@@ -44,6 +44,7 @@ from ._basins import (
     BASIN_SHARE,
     SAME_OPTIMUM_UNIT,
     SCREEN_EVALUATIONS,
+    UNAFFORDABLE,
     BasinSearch,
     Start,
     distinct_optima,
@@ -638,6 +639,9 @@ class CalibrationLoop:
             self._basins_record(False, f"the misfit is within the noise (p = {p_value:.2g})")
             return
         limit = min(self.budget, self.runs.calls + int(BASIN_SHARE * self.budget))
+        if not self.verifications_left(limit):
+            self._basins_record(False, UNAFFORDABLE)
+            return
         before = self.runs.calls
         starts = self._basin_starts(fit, model, surrogate_trials)
         self._say(
