@@ -363,6 +363,12 @@ class Profiler:
                 found = polished
                 self._log(quantity, sign, step, size, far, found)
             if parameter and pending is None and _leap(found, under, unders):
+                if over is not None and over.ratio > FAR_OVER and over.size > found.size:
+                    # a step over farther out, as far over, is a re-fit that could not follow
+                    # the trade either: no end (cover-212 of 240: k_s ρ 4,388 at −0.010, 0.11
+                    # at −0.004, 948 at −0.007; "k_s ≥ 0.014" stated, the truth 0.0089 at ρ
+                    # 0.11 with every other parameter its own)
+                    over, linear_end = None, None
                 return self._unfinished(quantity, q0, sign, linear_end, under, over, step)
             if found.size <= min(under.size, (1 - OPEN_UNIT) * size) and (
                 found.ratio <= AGREES[1] or pending is None
