@@ -6,7 +6,7 @@ the parameters. This takes every truth of the coverage benchmark (``coverage_set
 coat, its effects and its tests), solves each condition group at ``--points`` coats along
 Scoat (±1 %, the other parameters held), finds the largest change between neighbours
 beyond their median one (the angle where it lies), and halves that interval
-``--bisections`` times (30: a share of 10⁻¹¹ of Scoat). A smooth curve's change shrinks
+``--bisections`` times (30: a share of 2·10⁻¹² of Scoat). A smooth curve's change shrinks
 with the interval; a jump does not: what is left is the jump, printed against the set's
 noise, with the contact point (arc length from the clamp) on each side of it. Then the
 number of curves that jump by more than 0.5, 1 and 2 × their set's noise, by end tension.

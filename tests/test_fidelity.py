@@ -482,9 +482,9 @@ def test_calibration_goes_on_where_the_expensive_solver_fails(distorted_solver, 
     truth = TRUTHS[index]
     settings = f"thick = 0.15\nfail_above_tcoat_mm = {limit}"
     path = _calibration_study(log_runs / "cal", BENDING, truth, seed=seed, settings=settings)
-    path.write_text(
-        path.read_text().replace("calibration_solver_calls = 30", "calibration_solver_calls = 36")
-    )
+    text = path.read_text()
+    assert "calibration_solver_calls = 30" in text
+    path.write_text(text.replace("calibration_solver_calls = 30", "calibration_solver_calls = 36"))
     floor = _truth_rmse(path, truth, {"thick": 0.15, "fail_above_tcoat_mm": limit})
     before = _expensive_runs(log_runs)
     result = surrogate.calibrate(path, progress=False)

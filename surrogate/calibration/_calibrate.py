@@ -605,7 +605,8 @@ def _message(
     stopped: str | None = None,
 ) -> str:
     """The calibration's one message. Unconverged: the local fit's reason, and "raise
-    --budget" only where the budget is what stopped it (``budget_exhausted``); a fit
+    --budget" only where the budget is what stopped it (``budget_exhausted``; converged,
+    where it left no run for the search of other basins: ``basins``); a fit
     that stopped with runs left (``stalled``: four rounds whose test found nothing
     better) says that more runs would not have been spent there. ``basins``: what the
     search of other basins found (:meth:`~._basins.BasinSearch.sentence`), after the

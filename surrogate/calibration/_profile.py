@@ -176,7 +176,8 @@ class ProfileSide:
     ``unchecked`` where the budget stopped the profile before it did, a re-fit could not
     reach its target, or a parameter's re-fit leapt over the threshold beyond a flat stretch
     (:func:`_leap`) — the linear end (or the nearest step over) then stands, unchecked, where
-    the re-fits rose towards it; open where they found the misfit flat, or there is none;
+    the re-fits rose towards it; open where they found the misfit flat, where there is none,
+    or where that step leapt as well (far over, farther out, no range holding it);
     ``ratio`` is ``ΔRSS/Δ`` at ``point``; ``steps`` the
     re-fits made; ``point`` the parameters of the last re-fit (an alternative fit the
     data hardly tell from the optimum: what a next test should separate)."""
@@ -346,7 +347,6 @@ class Profiler:
             relearn = relearn and learned is not False  # …until the columns stay unseen
             found = self._step(quantity, q0, sign, x, jac)
             self._log(quantity, sign, step, size, far, found)
-            held_over = held_over and (found.ratio <= AGREES[1] or found.held)
             linear_check = step == 1 and linear_end is not None and found.ratio <= AGREES[1]
             if (
                 polishes < POLISHES
@@ -362,12 +362,19 @@ class Profiler:
                 polishes = polishes + 1 if polished is not found else POLISHES
                 found = polished
                 self._log(quantity, sign, step, size, far, found)
+            held_over = held_over and (found.ratio <= AGREES[1] or found.held)  # (polished)
             if parameter and pending is None and _leap(found, under, unders):
-                if over is not None and over.ratio > FAR_OVER and over.size > found.size:
-                    # a step over farther out, as far over, is a re-fit that could not follow
-                    # the trade either: no end (cover-212 of 240: k_s ρ 4,388 at −0.010, 0.11
-                    # at −0.004, 948 at −0.007; "k_s ≥ 0.014" stated, the truth 0.0089 at ρ
-                    # 0.11 with every other parameter its own)
+                if (
+                    over is not None
+                    and over.ratio > FAR_OVER
+                    and not over.held
+                    and over.size > found.size
+                ):
+                    # a step over farther out, as far over (ρ > FAR_OVER) and no range
+                    # holding it, is a re-fit that could not follow the trade either: no end,
+                    # nor the linear end it checked (cover-212 of 240: k_s ρ 4,388 at −0.010,
+                    # 0.11 at −0.004, 948 at −0.007; "k_s ≥ 0.014" stated, the truth 0.0089
+                    # at ρ 0.11 with every other parameter its own)
                     over, linear_end = None, None
                 return self._unfinished(quantity, q0, sign, linear_end, under, over, step)
             if found.size <= min(under.size, (1 - OPEN_UNIT) * size) and (

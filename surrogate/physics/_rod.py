@@ -1270,13 +1270,13 @@ def _held(
     last state is the equilibrium at the next angle as well, and the path stays there.
     Newton's iterations from the predictor's extrapolation can instead end in another
     equilibrium that the friction at the probe allows — the strip wrapped around it under
-    end tension, the contact point near a node: coats 10⁻¹² apart in Scoat gave curves
+    end tension, the contact point near a node: coats 2·10⁻¹² apart in Scoat gave curves
     0.7 N apart past the hinge (``benchmarks/smoothness.py``).
     """
     if last is None or not problem.active:
         return None
-    preferred = None if last.info[_INFO_ON_VERTEX] else int(last.info[_INFO_SEGMENT])
-    ev = problem.evaluate(current.psi, current.lam, theta, current, preferred)
+    kept = _kept_segment(last.info, -1)
+    ev = problem.evaluate(current.psi, current.lam, theta, current, kept if kept >= 0 else None)
     return ev if ev.converged and ev.lam >= 0.0 else None
 
 
