@@ -364,12 +364,7 @@ class Profiler:
                 self._log(quantity, sign, step, size, far, found)
             held_over = held_over and (found.ratio <= AGREES[1] or found.held)  # (polished)
             if parameter and pending is None and _leap(found, under, unders):
-                if (
-                    over is not None
-                    and over.ratio > FAR_OVER
-                    and not over.held
-                    and over.size > found.size
-                ):
+                if over is not None and _far_unheld(over) and over.size > found.size:
                     # a step over farther out, as far over (ρ > FAR_OVER) and no range
                     # holding it, is a re-fit that could not follow the trade either: no end,
                     # nor the linear end it checked (cover-212 of 240: k_s ρ 4,388 at −0.010,
@@ -423,9 +418,7 @@ class Profiler:
             size, interpolated = self._next_size(under, over, far, interpolated)
         if over is None:  # not closed by the curves within the steps
             return ProfileSide(None, "profile", under.ratio, MAX_STEPS, under.point(self))
-        if self._cornered(quantity, sign, under, held_over):
-            return ProfileSide(None, "profile", under.ratio, MAX_STEPS, under.point(self))
-        return self._bracketed(quantity, q0, sign, under, over, MAX_STEPS, unders)
+        return self._bracketed(quantity, q0, sign, under, over, MAX_STEPS, unders, held_over)
 
     def _cornered(self, quantity: Quantity, sign: float, under: _Step, held_over: bool) -> bool:
         """Whether the ranges end a side at the optimum itself: it holds a parameter at a
@@ -496,13 +489,17 @@ class Profiler:
         over: _Step,
         steps: int,
         earlier: Sequence[_Step] = (),
+        held_over: bool = False,
     ) -> ProfileSide:
         """The side ended between a point under the threshold and one over it: at the one
         over (the wider interval) — or open where the misfit was flat up to where a range
         holds the one over (a parameter at a bound the optimum was not at, :func:`_ranged`):
         there the ranges end it, not the curves (Tcoat along the valley of equally good
-        coats, until Ecoat reaches its bound)."""
-        if _ranged(quantity, sign, under, over, earlier):
+        coats, until Ecoat reaches its bound); or where they end it at the optimum itself
+        (``held_over``: a range held every step over, :meth:`_cornered`)."""
+        if _ranged(quantity, sign, under, over, earlier) or self._cornered(
+            quantity, sign, under, held_over
+        ):
             return ProfileSide(None, "profile", under.ratio, steps, under.point(self))
         return self._ended(quantity, q0, sign, over, steps)
 
@@ -839,12 +836,17 @@ def _leap(found: _Step, under: _Step, earlier: Sequence[_Step]) -> bool:
     is not checked beyond it. Not D's or Mp's: there a leap is the physics (a plastic moment
     low enough to yield within the test, where none did)."""
     return (
-        found.ratio > FAR_OVER
-        and not found.held
+        _far_unheld(found)
         and any(e is under for e in earlier)  # the side's own: not a point found elsewhere
         and _stretch(under, found)
         and _flat(under, earlier)
     )
+
+
+def _far_unheld(step: _Step) -> bool:
+    """Whether a re-fit lies far over the threshold (ρ > ``FAR_OVER``) with no range holding
+    it: one that could not follow a trade of parameters, beyond a flat stretch (:func:`_leap`)."""
+    return step.ratio > FAR_OVER and not step.held
 
 
 def _flat(under: _Step, earlier: Sequence[_Step]) -> bool:

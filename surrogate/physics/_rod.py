@@ -1275,8 +1275,7 @@ def _held(
     """
     if last is None or not problem.active:
         return None
-    kept = _kept_segment(last.info, -1)
-    ev = problem.evaluate(current.psi, current.lam, theta, current, kept if kept >= 0 else None)
+    ev = problem.evaluate(current.psi, current.lam, theta, current, _kept_segment(last.info, -1))
     return ev if ev.converged and ev.lam >= 0.0 else None
 
 
