@@ -44,7 +44,11 @@ import surrogate  # noqa: E402
 from benchmarks._machine import machine  # noqa: E402
 from surrogate import Rig  # noqa: E402
 from surrogate.calibration._problem import coat_section  # noqa: E402
-from surrogate.calibration._synthetic import coverage_sets, write_calibration_study  # noqa: E402
+from surrogate.calibration._synthetic import (  # noqa: E402
+    coverage_sets,
+    true_parameters,
+    write_calibration_study,
+)
 from surrogate.effects import get_effect  # noqa: E402
 from surrogate.study._spec import load_study  # noqa: E402
 
@@ -55,10 +59,7 @@ LOG_SCALED = {"bending_stiffness_nmm", "plastic_moment_n", "ecoat_gpa", "scoat_g
 def truths(case: dict[str, Any]) -> dict[str, float]:
     """Every profiled quantity's true value."""
     d, mp = coat_section(case["coating"], THICKNESS_MM)
-    values = {"bending_stiffness_nmm": d, "plastic_moment_n": mp, **case["coating"]}
-    for effect, params in case["hidden"].items():
-        values.update({f"{effect}.{k}": v for k, v in params.items()})
-    return values
+    return {"bending_stiffness_nmm": d, "plastic_moment_n": mp, **true_parameters(case)}
 
 
 def judged(entry: dict[str, Any], truth: float, low: float, high: float, log: bool) -> dict:

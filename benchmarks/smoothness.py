@@ -41,7 +41,11 @@ sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p or ".").resolve() != 
 from benchmarks._machine import machine  # noqa: E402
 from surrogate._errors import SolverError  # noqa: E402
 from surrogate.calibration._problem import CalibrationProblem, load_calibration  # noqa: E402
-from surrogate.calibration._synthetic import coverage_sets, write_calibration_study  # noqa: E402
+from surrogate.calibration._synthetic import (  # noqa: E402
+    coverage_sets,
+    true_parameters,
+    write_calibration_study,
+)
 from surrogate.solvers._builtin import solve_state  # noqa: E402
 
 SPAN = 0.01  # Scoat ±1 %
@@ -69,10 +73,7 @@ def jumps(case: dict[str, Any], points: int, bisections: int, element_size: floa
     point's arc length [mm] on either side)."""
     problem = _problem(case, element_size)
     names = problem.space.names
-    truth = {
-        **case["coating"],
-        **{f"{e}.{k}": v for e, params in case["hidden"].items() for k, v in params.items()},
-    }
+    truth = true_parameters(case)
     theta0 = np.array([truth[name] for name in names])
     k = names.index("scoat_gpa")
 

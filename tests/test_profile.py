@@ -38,6 +38,7 @@ from surrogate.calibration._synthetic import (
     _set,
     coverage_sets,
     synthetic_measurements,
+    true_parameters,
     write_calibration_study,
 )
 from surrogate.physics import bending_stiffness
@@ -47,18 +48,11 @@ SETS = {count: {case["name"]: case for case in coverage_sets(count)} for count i
 DEEP = 0.6  # the truth's misfit above the fit's, at most (a share of the threshold)
 
 
-def _truth(case):
-    values = dict(case["coating"])
-    for effect, params in case["hidden"].items():
-        values.update({f"{effect}.{k}": v for k, v in params.items()})
-    return values
-
-
 def _rho(case, path, fitted):
     """The truth's misfit above the fit's, in units of the 95 % threshold ``t²·s²``."""
-    truth = surrogate.compare(path, params=_truth(case), plots=False, progress=False)
+    truth = surrogate.compare(path, params=true_parameters(case), plots=False, progress=False)
     points = 91 * len(case["tests"])  # 0–90° every degree
-    dof = points - len(_truth(case))
+    dof = points - len(true_parameters(case))
     t2 = float(stats.t.ppf(0.975, dof)) ** 2
     return dof * ((truth.rmse_n / fitted.rmse_n) ** 2 - 1.0) / t2
 
@@ -81,7 +75,7 @@ def test_every_interval_holds_a_truth_deep_inside_the_region(tmp_path, count, na
     rho = _rho(case, path, result)
     assert rho < DEEP, rho  # the premise: the curves cannot tell the truth from the fit
     entries = {**result.determination["combinations"], **result.determination["intervals"]}
-    for quantity, value in _truth(case).items():
+    for quantity, value in true_parameters(case).items():
         entry = entries[quantity]
         low = -math.inf if entry["low"] is None else entry["low"]
         high = math.inf if entry["high"] is None else entry["high"]

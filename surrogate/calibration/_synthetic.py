@@ -26,6 +26,7 @@ __all__ = [
     "coverage_sets",
     "hidden_effect_tests",
     "synthetic_measurements",
+    "true_parameters",
     "write_calibration_study",
 ]
 
@@ -284,6 +285,15 @@ def _set(
         "noise_n": noise_n,
         "seed": seed,
     }
+
+
+def true_parameters(case: Mapping[str, Any]) -> dict[str, float]:
+    """A data set's truth as a calibration names it: the coating, and each hidden effect's
+    parameters as ``effect.param``."""
+    values = dict(case["coating"])
+    for effect, params in case["hidden"].items():
+        values.update({f"{effect}.{k}": v for k, v in params.items()})
+    return values
 
 
 def write_calibration_study(folder: Path, case: Mapping[str, Any], *, seed: int = 0) -> Path:

@@ -5,7 +5,11 @@ import pytest
 
 from surrogate._errors import SolverError
 from surrogate.calibration._problem import CalibrationProblem, load_calibration
-from surrogate.calibration._synthetic import coverage_sets, write_calibration_study
+from surrogate.calibration._synthetic import (
+    coverage_sets,
+    true_parameters,
+    write_calibration_study,
+)
 from surrogate.solvers._builtin import solve_state
 
 
@@ -33,10 +37,7 @@ def test_once_a_hinge_takes_the_rotation_the_force_stays(tmp_path):
     for case in coverage_sets(240)[0:120:2]:
         problem, group = _tensioned(case, tmp_path / case["name"])
         names = problem.space.names
-        truth = {
-            **case["coating"],
-            **{f"{e}.{k}": v for e, params in case["hidden"].items() for k, v in params.items()},
-        }
+        truth = true_parameters(case)
         theta0 = np.array([truth[name] for name in names])
         for share in np.linspace(-0.01, 0.01, 7):
             theta = theta0.copy()
