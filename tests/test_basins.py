@@ -108,23 +108,67 @@ def test_a_calibration_in_another_basin_searches_and_reaches_the_noise_floor(
     assert json.loads(json.dumps(result.to_json()))["basins"] == basins
 
 
-@pytest.mark.slow
-def test_a_systematic_misfit_the_budget_left_no_search_for_says_so(tmp_path):
-    """cover-236 of the coverage benchmark (tension in the truth and the model, one bending
-    length, study seed 0): its first local optimum, reached with the whole budget of 200
-    runs, misses the curves systematically (1.21 × the noise, p = 0.0013; the truth fits
-    far better, k_s 0.0097 against 0.019). The search for other basins had no run left,
-    yet the message said they "were searched (0 start(s), 0 solver runs): no other local
-    optimum found". It now says the budget left none, and what to raise (with 400 runs this
-    set reaches 0.95 × the noise)."""
-    from surrogate.calibration._basins import UNAFFORDABLE
-    from surrogate.calibration._synthetic import coverage_sets
+class _FirstOptimum(Exception):
+    """Raised once the first local fit has ended: what the budget must cover is known."""
 
-    case = next(c for c in coverage_sets(240) if c["name"] == "cover-236")
-    path = write_calibration_study(tmp_path, case, seed=case["study_seed"])
-    result = surrogate.calibrate(path, progress=False, record=False)
-    # the premise: the budget of 200 spent, but for less than a verification (2 runs)
-    assert result.misfit == "systematic" and result.solver_calls >= 199, result.message
+
+@pytest.mark.slow
+def test_a_systematic_misfit_the_budget_left_no_search_for_says_so(tmp_path, monkeypatch):
+    """A calibration whose first local optimum misses the curves systematically, with the
+    budget spent but for less than a verification when that optimum is verified: the
+    search for other basins had no run left, yet the message said they "were searched (0
+    start(s), 0 solver runs): no other local optimum found". It now says the budget left
+    none, and what to raise.
+
+    Seen on cover-236 of the coverage benchmark (tension, one bending length, study seed
+    0) with the study's 200 runs: on an AVX-512 host its first local optimum took the whole
+    budget at 1.21 × the noise (p = 0.0013). Which point a local phase ends at, and after
+    how many runs, depends on the last bits of the kernels: on a 2-core AMD EPYC without
+    AVX-512 (OpenBLAS's Haswell kernels, numpy's X86_V3 paths; also with
+    ``NPY_DISABLE_CPU_FEATURES=AVX2,FMA3``) the same calibration ended ``stalled`` at 172
+    runs, 1.21 × the noise, four rounds whose Jacobian the solver did not confirm — no
+    verified local optimum, so no misfit stated and no basin search, rightly: with
+    ``OPENBLAS_CORETYPE=Sandybridge`` it converged within the noise (0.96 × the noise,
+    p = 0.73) at 74 runs, a point 2 % of Ecoat away. The misfit at the stall was the
+    search's. So the test no longer counts on a trajectory: the anisotropy set stuck in
+    its other basin (:func:`_stuck_in_the_other_basin`: a verified local optimum at 21 ×
+    the noise on every machine), calibrated once to learn the runs its first local fit
+    takes here, then again with a budget of those runs and one more (less than a
+    verification of its condition groups): the same runs (the result cache holds them)
+    end at the same optimum with the budget spent (here: 38 runs, G = 2, a budget of 39)."""
+    from surrogate.calibration._basins import UNAFFORDABLE
+    from surrogate.calibration._statistics import SIGNIFICANCE
+
+    _stuck_in_the_other_basin(monkeypatch)
+    # the profiles of that optimum reach below it (the basin of the truth): followed, the
+    # point they found is the best, no local fit's, and the calibration no longer ends
+    # converged — what is under test is the search the budget left no run for, not them
+    monkeypatch.setattr(CalibrationLoop, "follow_better", lambda self, better: False)
+    local, ended, measuring = CalibrationLoop._local, [], [True]
+
+    def first_fit(self, residuals, start, *, near=False):
+        local(self, residuals, start, near=near)
+        if not ended:
+            fit = self.fits[-1]
+            ended.append((self.runs.calls, self.problem.runs_per_point, fit, self.p_value(fit)))
+            if measuring[0]:  # the first calibration: its runs are known
+                raise _FirstOptimum
+
+    monkeypatch.setattr(CalibrationLoop, "_local", first_fit)
+    path = write_calibration_study(tmp_path, CASE, seed=2)
+    budget = 200  # the study's
+    with pytest.raises(_FirstOptimum):
+        surrogate.calibrate(path, progress=False, record=False, max_solver_calls=budget)
+    measuring[0] = False
+    ((calls, G, fit, p_value),) = ended
+    # the premise: a verified local optimum, its misfit systematic, within the study's budget
+    assert fit.converged and p_value < SIGNIFICANCE and calls + G <= budget, fit.message
+    ended.clear()
+    budget = calls + G - 1  # spent but for less than a verification
+    result = surrogate.calibrate(path, progress=False, record=False, max_solver_calls=budget)
+    assert ended[0][0] == calls and ended[0][2].converged, ended  # the same first fit
+    assert result.status == "converged" and result.misfit == "systematic", result.message
+    assert result.solver_calls == calls and result.rmse_n > 10 * result.noise_n, result.message
     assert not result.basins["searched"] and result.basins["reason"] == UNAFFORDABLE
     assert "were searched" not in result.message
     assert f"systematic, but {UNAFFORDABLE}: another may fit better (raise --budget)" in (

@@ -328,10 +328,23 @@ def test_tcoats_walk_from_a_coat_held_at_its_bound_holds_the_truth(tmp_path, see
     made an "end" there and divided by its zero width (seed 1, the same kernels: the
     calibration raised ZeroDivisionError). A re-fit that took a modulus off the bound
     holding it at the optimum now takes a fresh Jacobian before it is judged; one that falls
-    back short of a point under the threshold leaves the side unchecked."""
+    back short of a point under the threshold leaves the side unchecked.
+
+    Which seeds end held, and after how many runs, depends on the kernels' last bits. On a
+    2-core AMD EPYC without AVX-512 (OpenBLAS's Haswell kernels, numpy's X86_V3 paths; the
+    same with ``NPY_DISABLE_CPU_FEATURES=AVX2,FMA3``) seed 0's local phase starts at Ecoat's
+    bound (0.5, Tcoat 0.0346 mm, 1.08 × the noise), and that coat is no local optimum there:
+    each first-order test's step, backtracked to 1/16, gains 0.057 %, 0.053 %, … 0.035 %
+    (full solver, over the 0.035 % tolerance), 22 runs a round (16 of them a
+    ``least_squares`` run that does not move from the kink of the held modulus), and the
+    study's 200 runs ended ``budget_exhausted``; with 400 the step shrinks, the fit leaves
+    the bound and converges at 302 runs (Ecoat 1.64, 1.069 × the noise, as seeds 1–3 do at
+    66–72 runs). With ``OPENBLAS_CORETYPE=Sandybridge`` seed 0 converges off the bound at
+    72 runs. The calibration gets the runs its local phase needs (400); the walk from a
+    held coat is exercised where the kernels end there."""
     case = SETS[240]["cover-056"]
     path = write_calibration_study(tmp_path, case, seed=seed)
-    result = surrogate.calibrate(path, progress=False, record=False)
+    result = surrogate.calibrate(path, progress=False, record=False, max_solver_calls=400)
     assert result.status == "converged", result.message
     entries = result.determination["intervals"]
     for quantity in ("ecoat_gpa", "scoat_gpa", "tcoat_mm"):

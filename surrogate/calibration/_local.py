@@ -646,7 +646,12 @@ def _first_order_test(model: ResidualModel, x: np.ndarray) -> _FirstOrderTest:
             f"{model.fd_step:g}: the solver's response is rough at this scale"
         )
         return _FirstOrderTest(False, predicted, None, x, text)
+    # 1e-5 / 10 is 1.0000000000000002e-06 in floating point: a step that close to the
+    # smallest is the smallest, else the test above is never reached (seen: cover-236,
+    # four rounds, the last two both "now 1e-06")
     smaller = max(model.fd_step / 10.0, MIN_FD_STEP_UNIT)
+    if smaller < 1.5 * MIN_FD_STEP_UNIT:
+        smaller = MIN_FD_STEP_UNIT
     text = (
         f"the Gauss–Newton model promises {100 * predicted:.2g} % lower RMSE but the full solver "
         f"gives none at {tried} of the step: the Jacobian is not trusted (finite-difference "
