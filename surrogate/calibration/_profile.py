@@ -44,7 +44,9 @@ taken), until they come out unseen again on that side. Where ``ρ`` lies within
 ``linear``); else the next ``η`` by the secant rule on ``√ΔRSS`` (between
 bracketing steps, by interpolation), at most ``MAX_STEPS``. A side whose step at the end
 of the quantity's range still lies under the threshold is *open*: the curves do not
-bound it there.
+bound it there. So is a side whose end a bound holds, not the curves: where the re-fit's
+Gauss–Newton model with that bound lifted falls under the threshold
+(:meth:`Profiler._walled`; the study file's ranges are then what to widen).
 
 A profile point whose RSS lies more than ``BETTER_CHI2 · s²`` below the optimum's is
 another basin (``better``): the calibration fits again from there.
@@ -111,6 +113,7 @@ OVER_AFTER_STEPS = 1  # a re-fit is judged over the threshold only after this ma
 # profile there ρ < 0.01, Ecoat's interval ±0.5 % with the truth 131 % above)…
 DESCENDING = 0.5  # …and only once a step no longer lowers ρ below this share of the last's…
 OVER_EVALUATIONS = 3  # …or after this many evaluations (6: the same intervals, 0.2 % more runs)
+RELEARNED_EVALUATIONS = 6  # …or this many after fresh columns (:meth:`Profiler._refit`)
 END_PRECISION = 0.1  # a bracket this narrow (share of its far step): the end, the far step
 MAX_STEPS = 8  # constrained re-fits of one side, at most
 POLISH_BELOW = 3.0  # a re-fit with ρ from AGREES[0] to this takes a fresh Jacobian and steps on
@@ -407,7 +410,10 @@ class Profiler:
                 polishes = polishes + 1 if polished is not under else POLISHES
                 if polished is not under and polished.ratio <= AGREES[1]:
                     unders = [polished if u is under else u for u in unders]
-                    under = polished if polished.size >= under.size else under
+                    # (it may reach an ulp short of the target, or onto it within
+                    # ONTO_TOLERANCE: still the same step, not a fall back)
+                    reached = polished.size >= (1.0 - OPEN_UNIT) * under.size
+                    under = polished if reached else under
             if over is not None:
                 width = over.size - under.size
                 if _ranged(quantity, sign, under, over, unders) and width <= OPEN_PRECISION * span:
@@ -435,6 +441,39 @@ class Profiler:
             and held_over
             and bool(np.any(self.optimum.pinned))
         )
+
+    def _walled(self, quantity: Quantity, sign: float, end: _Step) -> bool:
+        """Whether a bound, not the curves, holds ``end`` (a re-fit at or over the threshold
+        that would end a side): a coordinate at a face of the box (a parameter at its bound,
+        a held modulus in its own unit coordinate; the quantity's own excepted), and the
+        Gauss–Newton model of the re-fit at the same ``q`` falls under ``AGREES[0]`` with
+        those faces lifted where, within the box, it stays at ``AGREES[0]`` or over — the
+        bound's multiplier carries the rise (algebra: the residual is the re-fit's own, the
+        Jacobian its last). 0.6/0.35/0.02 at 10 mm, noise seed 500, OpenBLAS's Haswell
+        kernels on an AVX2 host: a fit with Ecoat at its lower bound and Scoat at its upper
+        one, Mp's upper re-fits ρ 0.25, 1.0, 4.0 at +0.028, +0.056, +0.11 % — Tcoat up, so
+        D up — and Mp stated 4.0–11.37 where a larger Scoat fits as well at any Mp above.
+        Never on a side the curves see at every coat (``ALWAYS_SEEN``)."""
+        if (quantity.name, sign) in ALWAYS_SEEN:
+            return False
+        x = end.x
+        faces = (x <= PIN_UNIT) | (x >= 1.0 - PIN_UNIT)
+        names = self.model.problem.space.names
+        if quantity.name in names:
+            faces[names.index(quantity.name)] = False
+        if not np.any(faces):
+            return False
+        residual = self.model.residual(x)  # (the re-fit's: no run)
+        gradient = self._gradient(quantity, x)
+
+        def ratio(step: np.ndarray) -> float:
+            rss = float(np.sum((residual + end.jac @ step) ** 2))
+            return (rss - self.optimum.rss) / self.optimum.threshold
+
+        boxed = ratio(_tangent_step(residual, end.jac, gradient, x))
+        lifted = ratio(_tangent_step(residual, end.jac, gradient, x, lifted=faces))
+        _LOG.debug("  %s: ρ %.4g within the box, %.4g lifted", quantity.name, boxed, lifted)
+        return lifted < AGREES[0] <= boxed
 
     def _unsettled_under(
         self, quantity: Quantity, sign: float, under: _Step, over: _Step, unders: list[_Step]
@@ -470,7 +509,10 @@ class Profiler:
         it (``ρ`` within ``LINEAR_HOLDS``), else where the re-fit placed it — moved out to
         where a quadratic rise would meet the threshold where it lay under it (``ρ < 1``:
         the re-fit's ``ρ`` is at most what its nuisance parameters allow, never less, so
-        only the outward move is safe)."""
+        only the outward move is safe). Open where a bound, not the curves, holds the end
+        (:meth:`_walled`)."""
+        if self._walled(quantity, sign, end):
+            return ProfileSide(None, "profile", end.ratio, steps, end.point(self))
         if how == "linear" and LINEAR_HOLDS[0] <= end.ratio <= LINEAR_HOLDS[1]:
             assert linear_end is not None  # a first step at the linear end
             value = end_value(quantity, q0, sign, abs(quantity.scale(linear_end) - q0))
@@ -506,7 +548,10 @@ class Profiler:
     def _ended(
         self, quantity: Quantity, q0: float, sign: float, found: _Step, steps: int
     ) -> ProfileSide:
-        """The side ended at ``found`` (open where that is the range's end)."""
+        """The side ended at ``found`` (open where that is the range's end, or where a bound,
+        not the curves, holds it: :meth:`_walled`)."""
+        if self._walled(quantity, sign, found):
+            return ProfileSide(None, "profile", found.ratio, steps, found.point(self))
         end = end_value(quantity, q0, sign, found.size)
         return ProfileSide(end, "profile", found.ratio, steps, found.point(self))
 
@@ -662,7 +707,9 @@ class Profiler:
             return best, jac, False
         step = _tangent_step(model.residual(best), jac, self._gradient(quantity, best), best)
         x = self._onto(quantity, best + step, target, jac)
-        again, ratio_again, jac = self._descend(quantity, target, x, best, jac, OVER_EVALUATIONS)
+        again, ratio_again, jac = self._descend(
+            quantity, target, x, best, jac, OVER_EVALUATIONS, RELEARNED_EVALUATIONS
+        )
         return (again if ratio_again < ratio else best), jac, True
 
     def _polished(
@@ -696,9 +743,11 @@ class Profiler:
         last_x: np.ndarray,
         jac: np.ndarray,
         evaluations: int,
+        most: int = OVER_EVALUATIONS,
     ) -> tuple[np.ndarray, float, np.ndarray]:
         """:meth:`_refit`'s Gauss–Newton steps from ``x`` (``last_x``: the point ``jac``
-        was last updated at): the evaluated point of lowest RSS, its ``ρ``, the Jacobian."""
+        was last updated at): the evaluated point of lowest RSS, its ``ρ``, the Jacobian
+        (``most``: the evaluations a re-fit over the threshold still descending may take)."""
         model = self.model
         last_r = model.residual(last_x)
         best, best_rss, best_ratio, last_ratio = x, math.inf, math.inf, math.inf
@@ -711,7 +760,7 @@ class Profiler:
                 last_x, last_r = x, r
             rss = float(r @ r)
             if rss >= best_rss:  # the step overshot: half of it, from the best point
-                if evaluation == allowed and allowed < OVER_EVALUATIONS:
+                if evaluation == allowed and allowed < most:
                     allowed += 1  # the half is evaluated: an overshoot is no judgement
                 x = self._onto(quantity, 0.5 * (best + x), target, jac)
                 continue
@@ -724,7 +773,7 @@ class Profiler:
             last_ratio = ratio
             if stepped and not descending and (ratio > FAR_OVER or evaluation >= evaluations):
                 break  # over it, and the last step no longer halved ρ: over it
-            if evaluation == allowed and descending and allowed < OVER_EVALUATIONS:
+            if evaluation == allowed and descending and allowed < most:
                 allowed += 1  # over it, still descending: not yet judged
             step = _tangent_step(r, jac, self._gradient(quantity, x), x)
             if np.max(np.abs(step)) < 1e-9:
@@ -898,12 +947,16 @@ def _linear_shift(
 
 
 def _tangent_step(
-    residual: np.ndarray, jac: np.ndarray, gradient: np.ndarray, x: np.ndarray
+    residual: np.ndarray,
+    jac: np.ndarray,
+    gradient: np.ndarray,
+    x: np.ndarray,
+    lifted: np.ndarray | None = None,
 ) -> np.ndarray:
     """The Gauss–Newton step ``d`` that minimises ``‖r + J d‖`` with ``g·d = 0`` (a heavy
     row), damped (Levenberg–Marquardt, ``DAMPING`` of ``‖J‖²``: along directions the
     curves hardly see, the undamped step leapt to its bounds, and off the valley), within
-    the box and ``±TRUST`` of ``x``."""
+    the box and ``±TRUST`` of ``x`` (``±TRUST`` alone along the coordinates ``lifted``)."""
     scale = max(float(np.linalg.norm(jac)), 1e-12)
     weight = 1e3 * scale / max(float(np.linalg.norm(gradient)), 1e-300)
     damping = math.sqrt(DAMPING) * scale * np.eye(x.size)
@@ -911,6 +964,8 @@ def _tangent_step(
     target = np.concatenate([-residual, [0.0], np.zeros(x.size)])
     low = np.maximum(-x, -TRUST)
     high = np.maximum(np.minimum(1.0 - x, TRUST), low + 1e-15)
+    if lifted is not None:
+        low, high = np.where(lifted, -TRUST, low), np.where(lifted, TRUST, high)
     return lsq_linear(matrix, target, bounds=(low, high), method="bvls").x
 
 
