@@ -411,8 +411,9 @@ class Profiler:
                 if polished is not under and polished.ratio <= AGREES[1]:
                     unders = [polished if u is under else u for u in unders]
                     # (it may reach an ulp short of the target, or onto it within
-                    # ONTO_TOLERANCE: still the same step, not a fall back)
-                    reached = polished.size >= (1.0 - OPEN_UNIT) * under.size
+                    # ONTO_TOLERANCE or OPEN_UNIT of it: the same step, not a fall back)
+                    short = max(OPEN_UNIT * under.size, ONTO_TOLERANCE * span)
+                    reached = polished.size >= under.size - short
                     under = polished if reached else under
             if over is not None:
                 width = over.size - under.size
@@ -446,17 +447,21 @@ class Profiler:
         """Whether a bound, not the curves, holds ``end`` (a re-fit at or over the threshold
         that would end a side): a coordinate at a face of the box (a parameter at its bound,
         a held modulus in its own unit coordinate; the quantity's own excepted), and the
-        Gauss–Newton model of the re-fit at the same ``q`` with those faces lifted keeps so
-        little of its rise within the box (``ρ`` at ``AGREES[0]`` or over) that a quadratic
-        rise from the optimum would meet the threshold only beyond the quantity's range —
-        the bound's multiplier carries the rise (algebra: the residual is the re-fit's own,
-        the Jacobian its last). A bound that carries part of it moves the end out but does
-        not open it (cover-239 of 240: k_e's re-fits at ±0.1 % ρ 1.03 and 0.98 within the
-        box, 0.75 and 0.74 with Tcoat's upper bound lifted: the curves bound k_e).
+        Gauss–Newton model of the re-fit at the same ``q`` with those faces lifted rises so
+        little from the same model at the optimum's ``q`` (where the re-fit within the box
+        is at ``AGREES[0]`` or over) that a quadratic rise would meet the threshold only
+        beyond the quantity's range — the bound's multiplier carries the rise (algebra: the
+        residuals and Jacobians are the re-fit's and the optimum's own). The faces are
+        those of the profile's own coordinates (a modulus held in its own unit coordinate
+        is one; in the fit coordinates its bound is a kink, and :meth:`_cornered` asks).
+        A bound that carries part of the rise moves the end out but does not open it
+        (cover-239 of 240: k_e's re-fits at ±0.1 % ρ 1.03 and 0.98 within the box, 0.75 and
+        0.74 with Tcoat's upper bound lifted, −0.26 at the optimum: the curves bound k_e).
         0.6/0.35/0.02 at 10 mm, noise seed 500, OpenBLAS's Haswell kernels on an AVX2 host:
         a fit with Ecoat at its lower bound and Scoat at its upper one, Mp's upper re-fits
         ρ 0.25, 1.0, 4.0 at +0.028, +0.056, +0.11 % — Tcoat up, so D up — and Mp stated
-        4.0–11.37 where a larger Scoat fits as well at any Mp above (lifted: ρ −10⁻⁴).
+        4.0–11.37 where a larger Scoat fits as well at any Mp above (lifted: ρ −1.4·10⁻⁴
+        at +0.056 %, −1.3·10⁻⁵ at the optimum).
         Never on a side the curves see at every coat (``ALWAYS_SEEN``)."""
         if (quantity.name, sign) in ALWAYS_SEEN:
             return False
@@ -478,8 +483,29 @@ class Profiler:
 
         boxed = ratio(_tangent_step(residual, end.jac, gradient, x))
         lifted = ratio(_tangent_step(residual, end.jac, gradient, x, lifted=faces))
-        _LOG.debug("  %s: ρ %.4g within the box, %.4g lifted", quantity.name, boxed, lifted)
-        return AGREES[0] <= boxed and lifted <= boxed * (end.size / far) ** 2
+        optimum = self.optimum  # lifted there too: its own pull against a bound is no rise
+        at_optimum = self.model.residual(optimum.x)
+        step = _tangent_step(
+            at_optimum, optimum.jacobian, self._gradient(quantity, optimum.x), optimum.x, faces
+        )
+        start = (float(np.sum((at_optimum + optimum.jacobian @ step) ** 2)) - optimum.rss) / (
+            optimum.threshold
+        )
+        _LOG.debug(
+            "  %s: ρ %.4g within the box; lifted %.4g, %.4g at the optimum",
+            quantity.name,
+            boxed,
+            lifted,
+            start,
+        )
+        return AGREES[0] <= boxed and lifted - start <= (end.size / far) ** 2
+
+    def _opened(self, end: _Step, steps: int) -> ProfileSide:
+        """A side a bound holds open (:meth:`_walled`): its re-fit the alternative fit only
+        where it lies at the threshold, no farther over (a fit the data hardly tell from
+        the optimum, what a next test separates)."""
+        point = end.point(self) if end.ratio <= AGREES[1] else None
+        return ProfileSide(None, "profile", end.ratio, steps, point)
 
     def _unsettled_under(
         self, quantity: Quantity, sign: float, under: _Step, over: _Step, unders: list[_Step]
@@ -518,7 +544,7 @@ class Profiler:
         only the outward move is safe). Open where a bound, not the curves, holds the end
         (:meth:`_walled`)."""
         if self._walled(quantity, sign, end):
-            return ProfileSide(None, "profile", end.ratio, steps, end.point(self))
+            return self._opened(end, steps)
         if how == "linear" and LINEAR_HOLDS[0] <= end.ratio <= LINEAR_HOLDS[1]:
             assert linear_end is not None  # a first step at the linear end
             value = end_value(quantity, q0, sign, abs(quantity.scale(linear_end) - q0))
@@ -557,7 +583,7 @@ class Profiler:
         """The side ended at ``found`` (open where that is the range's end, or where a bound,
         not the curves, holds it: :meth:`_walled`)."""
         if self._walled(quantity, sign, found):
-            return ProfileSide(None, "profile", found.ratio, steps, found.point(self))
+            return self._opened(found, steps)
         end = end_value(quantity, q0, sign, found.size)
         return ProfileSide(end, "profile", found.ratio, steps, found.point(self))
 
@@ -753,7 +779,8 @@ class Profiler:
     ) -> tuple[np.ndarray, float, np.ndarray]:
         """:meth:`_refit`'s Gauss–Newton steps from ``x`` (``last_x``: the point ``jac``
         was last updated at): the evaluated point of lowest RSS, its ``ρ``, the Jacobian
-        (``most``: the evaluations a re-fit over the threshold still descending may take)."""
+        (``most``: the evaluations a re-fit over the threshold may take while it still
+        descends, or to evaluate an overshot step's half)."""
         model = self.model
         last_r = model.residual(last_x)
         best, best_rss, best_ratio, last_ratio = x, math.inf, math.inf, math.inf
