@@ -649,7 +649,7 @@ def _first_order_test(model: ResidualModel, x: np.ndarray) -> _FirstOrderTest:
     # 1e-5 / 10 is 1.0000000000000002e-06 in floating point: a step that close to the
     # smallest is the smallest, else the test above is never reached (seen: cover-236,
     # four rounds, the last two both "now 1e-06")
-    smaller = max(model.fd_step / 10.0, MIN_FD_STEP_UNIT)
+    smaller = model.fd_step / 10.0
     if smaller < 1.5 * MIN_FD_STEP_UNIT:
         smaller = MIN_FD_STEP_UNIT
     text = (

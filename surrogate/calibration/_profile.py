@@ -443,7 +443,7 @@ class Profiler:
             and bool(np.any(self.optimum.pinned))
         )
 
-    def _walled(self, quantity: Quantity, sign: float, end: _Step) -> bool:
+    def _walled(self, quantity: Quantity, q0: float, sign: float, end: _Step) -> bool:
         """Whether a bound, not the curves, holds ``end`` (a re-fit at or over the threshold
         that would end a side): a coordinate at a face of the box (a parameter at its bound,
         a held modulus in its own unit coordinate; the quantity's own excepted), and the
@@ -465,7 +465,6 @@ class Profiler:
         Never on a side the curves see at every coat (``ALWAYS_SEEN``)."""
         if (quantity.name, sign) in ALWAYS_SEEN:
             return False
-        q0 = quantity.scaled(self.model.point(self.optimum.x))
         far = abs(quantity.range_scaled[1 if sign > 0 else 0] - q0)
         x = end.x
         faces = (x <= PIN_UNIT) | (x >= 1.0 - PIN_UNIT)
@@ -474,23 +473,18 @@ class Profiler:
             faces[names.index(quantity.name)] = False
         if not np.any(faces):
             return False
-        residual = self.model.residual(x)  # (the re-fit's: no run)
-        gradient = self._gradient(quantity, x)
 
-        def ratio(step: np.ndarray) -> float:
-            rss = float(np.sum((residual + end.jac @ step) ** 2))
+        def ratio(at: np.ndarray, jac: np.ndarray, lifted: np.ndarray | None) -> float:
+            """The Gauss–Newton model's ``ρ`` of the re-fit from ``at`` at its own ``q``."""
+            residual = self.model.residual(at)  # (evaluated already: no run)
+            step = _tangent_step(residual, jac, self._gradient(quantity, at), at, lifted)
+            rss = float(np.sum((residual + jac @ step) ** 2))
             return (rss - self.optimum.rss) / self.optimum.threshold
 
-        boxed = ratio(_tangent_step(residual, end.jac, gradient, x))
-        lifted = ratio(_tangent_step(residual, end.jac, gradient, x, lifted=faces))
-        optimum = self.optimum  # lifted there too: its own pull against a bound is no rise
-        at_optimum = self.model.residual(optimum.x)
-        step = _tangent_step(
-            at_optimum, optimum.jacobian, self._gradient(quantity, optimum.x), optimum.x, faces
-        )
-        start = (float(np.sum((at_optimum + optimum.jacobian @ step) ** 2)) - optimum.rss) / (
-            optimum.threshold
-        )
+        boxed = ratio(x, end.jac, None)
+        lifted = ratio(x, end.jac, faces)
+        # lifted at the optimum too: its own pull against a bound is no rise
+        start = ratio(self.optimum.x, self.optimum.jacobian, faces)
         _LOG.debug(
             "  %s: ρ %.4g within the box; lifted %.4g, %.4g at the optimum",
             quantity.name,
@@ -543,7 +537,7 @@ class Profiler:
         the re-fit's ``ρ`` is at most what its nuisance parameters allow, never less, so
         only the outward move is safe). Open where a bound, not the curves, holds the end
         (:meth:`_walled`)."""
-        if self._walled(quantity, sign, end):
+        if self._walled(quantity, q0, sign, end):
             return self._opened(end, steps)
         if how == "linear" and LINEAR_HOLDS[0] <= end.ratio <= LINEAR_HOLDS[1]:
             assert linear_end is not None  # a first step at the linear end
@@ -582,7 +576,7 @@ class Profiler:
     ) -> ProfileSide:
         """The side ended at ``found`` (open where that is the range's end, or where a bound,
         not the curves, holds it: :meth:`_walled`)."""
-        if self._walled(quantity, sign, found):
+        if self._walled(quantity, q0, sign, found):
             return self._opened(found, steps)
         end = end_value(quantity, q0, sign, found.size)
         return ProfileSide(end, "profile", found.ratio, steps, found.point(self))
