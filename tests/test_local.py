@@ -167,6 +167,37 @@ def test_a_difference_step_takes_no_coat_past_a_bound_it_lies_inside(tmp_path, n
         assert sum(v == pytest.approx(spec.low if side < 0 else spec.high) for v in values) >= 2
 
 
+@pytest.mark.parametrize(
+    ("name", "side"), [("ecoat_gpa", -1), ("ecoat_gpa", 1), ("scoat_gpa", -1), ("scoat_gpa", 1)]
+)
+def test_the_declared_jacobian_at_a_held_modulus_is_its_difference_in_the_declared_units(
+    tmp_path, name, side
+):
+    """``∂r/∂u`` at Ecoat or Scoat on a bound is the slope along the declared coordinates
+    (the modulus held there): each column within 2 % of a forward difference in ``u``.
+    Tcoat's column had counted the section's change twice at a lower bound, where the Tcoat
+    step at fixed D or Mp pushes the modulus outwards (norm 315 against 157)."""
+    problem = _problem(tmp_path, 0)
+    space, k = problem.space, list(problem.space.names).index(name)
+    theta = np.array([TRUTH[n] for n in space.names])
+    theta[k] = space[name].low if side < 0 else space[name].high
+    model = ResidualModel(problem, SolverRuns(problem, tmp_path / "cache", jobs=1))
+    unit = np.clip(space.to_unit(theta[None, :])[0], 0.0, 1.0)
+    jac = model.unit_jacobian(unit)
+    at = model.residual(model.coordinates.from_unit(unit))
+    for j in range(unit.size):
+        step = 1e-5 if unit[j] + 1e-5 <= 1.0 else -1e-5
+        moved = unit.copy()
+        moved[j] += step
+        direct = (model.residual(model.coordinates.from_unit(moved)) - at) / step
+        scale = max(np.linalg.norm(direct), 1e-9 * np.linalg.norm(jac))
+        assert np.linalg.norm(jac[:, j] - direct) <= 0.02 * scale, (
+            space.names[j],
+            jac[:, j],
+            direct,
+        )
+
+
 def test_at_a_corner_a_difference_keeps_its_side_where_the_other_leaves_the_box(tmp_path):
     """Tcoat at its lower bound and Scoat 0.1 % above its own: the Tcoat step up would take
     Scoat past its bound, and the step down would leave the box, where the range holds

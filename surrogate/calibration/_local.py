@@ -134,6 +134,13 @@ class FitCoordinates:
             if spec.name not in self.declared
         ]
 
+    def held(self, x: np.ndarray) -> list[int]:
+        """The indices of the moduli their range holds at its bound at fit coordinates ``x``
+        (their section's value would take them past it)."""
+        if not self.coating:
+            return []
+        return [i for i, spec, value in self._moduli(x) if not spec.low <= value <= spec.high]
+
     def sectioned(self) -> list[int]:
         """The indices of the moduli in their section's coordinate (where a bound of theirs is
         a kink)."""
@@ -196,7 +203,7 @@ class FitCoordinates:
         x = np.clip(np.asarray(x, dtype=float), 0.0, 1.0)
         if not self.coating:
             return x
-        held = [i for i, spec, value in self._moduli(x) if not spec.low <= value <= spec.high]
+        held = self.held(x)
         if held:
             x[held] = np.clip(self.from_unit(self.to_unit(x)), 0.0, 1.0)[held]
         return x
@@ -366,7 +373,13 @@ class ResidualModel:
         need it where the bounds are those of the box): the differences taken in the fit
         coordinates, where the valley of equally good coatings is straight, times
         ``∂x/∂u`` (central differences of smooth algebra). Differences taken in ``u``
-        straddle that narrow valley and made a free Tcoat look determined to ±0.4 %."""
+        straddle that narrow valley and made a free Tcoat look determined to ±0.4 %.
+
+        Where a difference's shifted point has a modulus held at its bound (a Tcoat step
+        that pushes Ecoat past its lower bound at fixed D), that column is already the slope
+        at the held modulus: the section's own change is in it, and ``∂x/∂u`` does not add
+        it again (it had doubled Tcoat's column at Ecoat's or Scoat's lower bound: column
+        norm 315 against 157 differenced in ``u``)."""
         x = self.coordinates.from_unit(unit)
         step = 1e-6
         dx_du = np.column_stack(
@@ -379,7 +392,12 @@ class ResidualModel:
                 for e in np.eye(unit.size)
             ]
         )
-        return self.jacobian(x) @ dx_du
+        jac = self.jacobian(x)
+        for j in range(x.size):
+            for i in self.coordinates.held(self.shifted(x, j)[0]):
+                if i != j:
+                    dx_du[i, j] = 0.0
+        return jac @ dx_du
 
     def evaluated(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """The parameters and curves (G, A) of every point evaluated so far, in order (a
