@@ -59,6 +59,7 @@ KINDS: tuple[tuple[str, Callable[[str], bool]], ...] = (
     ("SciPy's optimisers (outside the GP fits)", lambda s: "scipy/optimize" in s),
 )
 TEST_FILE = re.compile(r"\((tests/[\w/]+\.py):\d+\)")
+TEST_FUNCTION = re.compile(r"(test_\w+) \((tests/[\w/]+\.py):\d+\)")
 
 
 def samples(path: Path) -> Iterator[tuple[str, int]]:
@@ -76,10 +77,14 @@ def kind_of(stack: str) -> str:
 def report(path: Path) -> str:
     kinds: collections.Counter[str] = collections.Counter()
     files: collections.Counter[str] = collections.Counter()
+    tests: collections.Counter[str] = collections.Counter()
     for stack, count in samples(path):
         kinds[kind_of(stack)] += count
         match = TEST_FILE.search(stack)
         files[match.group(1) if match else "(none)"] += count
+        test = TEST_FUNCTION.search(stack)
+        if test:
+            tests[f"{test.group(2)}::{test.group(1)}"] += count
     total = sum(kinds.values())
     if not total:
         raise SystemExit(f"{path}: no samples; is it a py-spy raw file (-f raw)?")
@@ -92,6 +97,11 @@ def report(path: Path) -> str:
         "interpreters the tests start, but for a test module run as a script)",
     ]
     lines += [f"  {n / total:6.1%}  {name}" for name, n in files.most_common(15)]
+    lines += [
+        "",
+        "test function on the stack (its parameters together; the CLI it starts is not in it)",
+    ]
+    lines += [f"  {n / total:6.1%}  {name}" for name, n in tests.most_common(25)]
     return "\n".join(lines)
 
 
@@ -101,7 +111,7 @@ def record(out: Path) -> None:
         raise SystemExit("py-spy not found; pip install -e '.[dev]' installs it")
     # scripts/test.sh's pytest options (the waiting tests in a process of their own)
     command = [sys.executable, "-m", "pytest", "-q", "-n", "auto", "--dist", "loadgroup"]
-    command += ["-p", "no:cacheprovider"]
+    command += ["-p", "no:cacheprovider", "--durations=40"]  # each test's wall time too
     start = time.perf_counter()
     spy_options = ["--subprocesses", "--nonblocking", "-r", str(RATE_HZ), "-f", "raw"]
     done = subprocess.run(
