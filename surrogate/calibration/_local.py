@@ -137,23 +137,9 @@ class FitCoordinates:
     def held(self, x: np.ndarray) -> list[int]:
         """The indices of the moduli their range holds at its bound at fit coordinates ``x``
         (their section's value would take them past it)."""
-        return list(self.held_share(x, x))
-
-    def held_share(self, x: np.ndarray, shifted: np.ndarray) -> dict[int, float]:
-        """The moduli held at their bound at ``shifted``, each with the share of the move from
-        ``x`` that lies within its range (in its log, along which the move is nearly straight):
-        0 where ``x`` holds it already, between 0 and 1 where the move crosses the bound."""
         if not self.coating:
-            return {}
-        before = {i: value for i, _, value in self._moduli(x)}
-        shares = {}
-        for i, spec, value in self._moduli(shifted):
-            if spec.low <= value <= spec.high:
-                continue
-            start, bound = before[i], spec.low if value < spec.low else spec.high
-            inside = spec.low <= start <= spec.high
-            shares[i] = math.log(start / bound) / math.log(start / value) if inside else 0.0
-        return shares
+            return []
+        return [i for i, spec, value in self._moduli(x) if not spec.low <= value <= spec.high]
 
     def sectioned(self) -> list[int]:
         """The indices of the moduli in their section's coordinate (where a bound of theirs is
@@ -321,11 +307,10 @@ class ResidualModel:
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         """``∂r/∂x``: forward differences of ``fd_step`` in fit coordinates (inwards at a
-        bound, also where Ecoat or Scoat is held at theirs or its own step would take it past
-        its bound, and where the step would take one of them past a bound from inside,
-        :meth:`FitCoordinates.crosses_a_bound`, unless the inward step would leave the box:
-        at such a corner the forward step stays); a column whose shifted run failed is
-        zero."""
+        bound, also where Ecoat or Scoat is held at theirs, and where the step would take
+        one of them past a bound from inside, :meth:`FitCoordinates.crosses_a_bound`, unless
+        the inward step would leave the box: at such a corner the forward step stays); a
+        column whose shifted run failed is zero."""
         return self.columns(x, self.differenced(x))
 
     def differenced(self, x: np.ndarray) -> Sequence[int]:
@@ -349,11 +334,8 @@ class ResidualModel:
         shifted = x.copy()
         shifted[j] += step
         held = np.array_equal(self.point(shifted), self.point(x))
-        # a modulus's own step past its bound from a hair inside it (at the bound, as the
-        # statistics judge it) moves it by that hair only: a share of its slope
-        own = j in self.coordinates.held(shifted)
         if held or (  # …or near its bound, where the other side lies within the box
-            (own or self.coordinates.crosses_a_bound(x, shifted)) and 0.0 <= x[j] - step <= 1.0
+            self.coordinates.crosses_a_bound(x, shifted) and 0.0 <= x[j] - step <= 1.0
         ):
             shifted[j] = x[j] - step  # Ecoat or Scoat held at its bound: inwards
             step = -step
@@ -395,10 +377,9 @@ class ResidualModel:
 
         Where a difference's shifted point has a modulus held at its bound (a Tcoat step
         that pushes Ecoat past its lower bound at fixed D), that column is already the slope
-        at the held modulus over the part of the step beyond the bound: the section's own
-        change is in it there, and ``∂x/∂u`` adds it only for the share of the step inside
-        the range (:meth:`FitCoordinates.held_share`; it had doubled Tcoat's column at
-        Ecoat's or Scoat's lower bound: column norm 315 against 157 differenced in ``u``)."""
+        at the held modulus: the section's own change is in it, and ``∂x/∂u`` does not add
+        it again (it had doubled Tcoat's column at Ecoat's or Scoat's lower bound: column
+        norm 315 against 157 differenced in ``u``)."""
         x = self.coordinates.from_unit(unit)
         step = 1e-6
         dx_du = np.column_stack(
@@ -413,9 +394,9 @@ class ResidualModel:
         )
         jac = self.jacobian(x)
         for j in range(x.size):
-            for i, share in self.coordinates.held_share(x, self.shifted(x, j)[0]).items():
+            for i in self.coordinates.held(self.shifted(x, j)[0]):
                 if i != j:
-                    dx_du[i, j] *= share
+                    dx_du[i, j] = 0.0
         return jac @ dx_du
 
     def evaluated(self) -> list[tuple[np.ndarray, np.ndarray]]:
