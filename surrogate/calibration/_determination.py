@@ -548,12 +548,11 @@ def _held_side(name: str, entry: Mapping[str, Any], value: float) -> int:
     both sides are open (the other one a bound holds: ``_profile``'s ``_walled``), the side
     whose re-fit is the optimum itself (a side at the parameter's own range end is open at
     once, its point the optimum's)."""
-    if (entry["low"] is None) != (entry["high"] is None):
-        return -1 if entry["low"] is None else 1
-    points = entry.get("points") or {}
-    for key, side in (("high", 1), ("low", -1)):
-        point = points.get(key)
-        found = None if point is None else point["params"].get(name)
-        if found is not None and math.isclose(found, value, rel_tol=1e-9):
-            return side
+    if (entry["low"] is None) == (entry["high"] is None):
+        points = entry.get("points") or {}
+        for key, side in (("high", 1), ("low", -1)):
+            point = points.get(key)
+            found = None if point is None else point["params"].get(name)
+            if found is not None and math.isclose(found, value, rel_tol=1e-9):
+                return side
     return -1 if entry["low"] is None else 1

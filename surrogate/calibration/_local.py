@@ -392,12 +392,11 @@ class ResidualModel:
                 for e in np.eye(unit.size)
             ]
         )
-        jac = self.jacobian(x)
         for j in range(x.size):
             for i in self.coordinates.held(self.shifted(x, j)[0]):
                 if i != j:
                     dx_du[i, j] = 0.0
-        return jac @ dx_du
+        return self.jacobian(x) @ dx_du
 
     def evaluated(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """The parameters and curves (G, A) of every point evaluated so far, in order (a
