@@ -9,7 +9,9 @@ tension 0–60 N, two replicates. Per truth: calibrate, ``next-test`` (its defau
 built-in solver plus noise), the reference test again, and ``--random`` random tests of
 ``[design]``, and calibrate again. Reported: whether the goal's interval holds the truth
 after the recommended test; its width now, predicted and realised, against the
-reference's and the random tests' (median); the realised over predicted width. And one
+reference's and the random tests' (median); the realised over predicted width; and every
+open side next-test says no test inside ``[design]`` closes, against the recalibrations
+with each added test (the recommended, the reference, the random ones). And one
 case whose effect's condition never varies (tension-free data of a coat that stiffens
 with tension): the effect is listed untestable, and the diagnosis names it after the test
 next-test proposes.
@@ -156,16 +158,17 @@ def run_case(task: tuple[int, int]) -> dict[str, Any]:
                 for k in range(random_tests)
             },
         }
-        realised = {}
+        realised, closed = {}, []
+        true_values = {"bending_stiffness_nmm": d, "plastic_moment_n": mp, **truth}
         for k, (tag, conditions) in enumerate(tests.items()):
             again_path = _with_test(root / tag, path, truth, conditions, tag, 900 + 10 * index + k)
             again = surrogate.calibrate(again_path, progress=False)
             if again.determination is None:
                 realised[tag] = {"status": again.status}
                 continue
-            entry = {**again.determination["combinations"], **again.determination["intervals"]}[
-                goal
-            ]
+            entries = {**again.determination["combinations"], **again.determination["intervals"]}
+            closed += _closed_sides(advice.unsettled, entries, true_values, tag)
+            entry = entries[goal]
             realised[tag] = {
                 "width": _width(again_path, goal, entry),
                 "covered": _covered(entry, true_value),
@@ -190,8 +193,30 @@ def run_case(task: tuple[int, int]) -> dict[str, Any]:
         and shrink.get("recommended", 0) > 0
         and shrink.get("recommended", 0) >= 2 * max(statistics.median(randoms), 0),
         "realised_over_predicted": None if got is None or predicted <= 0 else got / predicted,
+        # "no test inside [design] settles X": every open side it names, against the
+        # recalibrations with each added test (all inside [design])
+        "unsettled": [(u["quantity"], side) for u in advice.unsettled for side in u["sides"]],
+        "unsettled_closed": closed,
         "message": advice.message,
     }
+
+
+def _closed_sides(
+    unsettled: list[dict[str, Any]], entries: dict[str, Any], truths: dict[str, float], tag: str
+) -> list[dict[str, Any]]:
+    """The open sides next-test said no test closes that the recalibration with test
+    ``tag`` closed, each with whether the closed side holds the truth."""
+    found = []
+    for item in unsettled:
+        entry = entries[item["quantity"]]
+        for side in item["sides"]:
+            if entry[side] is not None:
+                truth = truths[item["quantity"]]
+                holds = truth >= entry[side] if side == "low" else truth <= entry[side]
+                found.append(
+                    {"quantity": item["quantity"], "side": side, "test": tag, "holds": holds}
+                )
+    return found
 
 
 def untestable_case() -> dict[str, Any]:
@@ -253,6 +278,12 @@ def main() -> None:
         "beats_reference_2x": sum(r["beats_reference_2x"] for r in done),
         "beats_random_2x": sum(r["beats_random_2x"] for r in done),
         "within_1_5_of_predicted": sum(1 / 1.5 <= x <= 1.5 for x in ratios),
+        "unsettled_sides": sum(len(r["unsettled"]) for r in done),
+        "unsettled_closed_by_an_added_test": [
+            {"truth": "/".join(map(str, r["truth"].values())), **c}
+            for r in done
+            for c in r["unsettled_closed"]
+        ],
         "realised_over_predicted": ratios,
         "untestable": untestable,
         "wall_s": time.perf_counter() - started,

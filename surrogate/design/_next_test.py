@@ -61,6 +61,16 @@ SETTLES = 0.9  # a candidate settles a quantity where it cuts its interval's wid
 # what a test that does not record a condition was run at (the rig's and the effects' own)
 SEEN_SHARE = 1e-3  # a test that narrows a quantity by less than this share there sees nothing
 PRIOR_UNIT = 0.5  # a Gaussian prior of this share of each range keeps unseen ones finite
+# why no candidate closes an open side (``NextTestResult.unsettled``), the first that applies
+UNSETTLED = {
+    "near_fit": "a test inside [design] sees them near today's fit but not where the profiles "
+    "ended their open sides, so it closes them only if the coat lies where it still sees them",
+    "absorbed": "the other parameters re-fit to each test sensitive to them where the profiles "
+    "ended their open sides",
+    "insensitive": "none of the tests is sensitive to them where the profiles ended their open "
+    "sides, nor near today's fit",
+    "no re-fit": "the profiles left no re-fit at their open sides' ends to weigh the tests against",
+}
 UNRECORDED: dict[str, Any] = {"direction": "warp", "tension_n": 0.0, "rate_deg_s": 90.0}
 
 _LOG = logging.getLogger(__name__)
@@ -80,7 +90,12 @@ class NextTestResult:
     the same for the replicates of the reference test (the measurements' first), the
     baseline. ``untestable``: effects whose condition never varies in the data, each
     ``{effect, reason, test}``; ``inseparable``: pairs no candidate tells apart, each
-    ``{effects, largest_difference_n, at, reason}``. ``candidates`` counts the tests
+    ``{effects, largest_difference_n, at, reason}``; ``unsettled``: the quantities with a
+    side the data leave open that no candidate closes, each ``{quantity, kind, now,
+    sides, ends, reason, near_fit}`` (``now`` today's interval in words, ``sides`` the open
+    sides no test is predicted to close, ``ends`` the quantity at each one's re-fit,
+    ``reason`` a key of :data:`UNSETTLED`, ``near_fit`` the test that settles it near
+    today's fit where that is the reason). ``candidates`` counts the tests
     ranked, ``solver_calls`` the built-in runs it took; ``figure`` the PNG of the
     recommended test's curves; ``notes`` what the ranking ran on.
     """
@@ -96,6 +111,7 @@ class NextTestResult:
     figure: str | None
     message: str
     notes: list[str] = field(default_factory=list)
+    unsettled: list[dict[str, Any]] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -298,12 +314,13 @@ class _Planner:
         reference = entry(len(tests) - 1)
         inseparable = self._inseparable(pairs, pair_curves, tests)
         untestable = self._untestable()
+        unsettled = self._unsettled(predicted, alternatives, far, shrink, tests)
         figure = (
             None
             if output_dir is False or not recommended
             else self._figure(tests[order[0]], curves[:, order[0]], alternatives, goal, output_dir)
         )
-        message = self._message(goal, recommended, reference, untestable, inseparable)
+        message = self._message(goal, recommended, reference, untestable, inseparable, unsettled)
         return NextTestResult(
             study=calibration_study_name(self.problem.spec, chosen),
             goal=goal,
@@ -315,6 +332,7 @@ class _Planner:
             solver_calls=len(self.used),
             figure=figure,
             message=message,
+            unsettled=unsettled,
             notes=[
                 "ranked on the built-in model"
                 + (
@@ -345,12 +363,15 @@ class _Planner:
         J, F, S, g)`` — the measured curves' Jacobian ``J`` (n, p) (the residual model's on
         the built-in solver, as every run here: its runs mostly the calibration's, in the
         result cache), the tests' curves ``F`` (T, A), their sensitivities ``S`` (T, A, p)
-        (the same differences as ``J``'s, :meth:`ResidualModel.shifted`: inwards at a bound
-        and where Ecoat or Scoat is held at theirs) and every quantity's ``g = ∂q/∂x``."""
+        and every quantity's ``g = ∂q/∂x`` — the same differences as ``J``'s
+        (:meth:`ResidualModel.shifted`: inwards at a bound and where Ecoat or Scoat is held
+        at theirs). ``g`` by central differences instead (``quantity_gradient``) had half
+        the slope where one side is held and a column where ``J`` had none, and a 5 mm
+        test was predicted to pin D to ±0.0002 % where it gave ±0.03 % (benchmarks/
+        next_test.py, 0.7/0.3/0.015: realised over predicted 145)."""
         from ..calibration._fidelity import CorrectedRuns
         from ..calibration._local import ResidualModel
         from ..calibration._loop import SolverRuns
-        from ..calibration._profile import quantity_gradient
 
         space, chosen = self.problem.space, tuple(self.problem.effects)
         cache = self.problem.spec.directory / ".solver-cache"
@@ -364,7 +385,7 @@ class _Planner:
         for params in points:
             x = model.pin(np.array([params[n] for n in space.names]))
             shifted = [model.shifted(x, j) for j in range(x.size)]
-            at.append((x, np.array([step for _, step in shifted]), model.jacobian(x)))
+            at.append((x, shifted, model.jacobian(x)))
             fits.append((chosen, dict(params)))
             fits += [
                 (chosen, dict(zip(space.names, map(float, model.point(z)), strict=True)))
@@ -374,9 +395,14 @@ class _Planner:
         p = len(space.names)
         curves = self.curves(fits, tests).reshape(len(points), p + 1, len(tests), -1)
         out = []
-        for (x, steps, data), c in zip(at, curves, strict=True):
+        for (x, shifted, data), c in zip(at, curves, strict=True):
+            steps = np.array([step for _, step in shifted])
             sensitivity = np.nan_to_num((c[1:] - c[0]) / steps[:, None, None]).transpose(1, 2, 0)
-            gradients = {n: quantity_gradient(model, q, x) for n, q in self.quantities.items()}
+            ends = [model.point(z) for z, _ in shifted]
+            gradients = {
+                n: np.array([q.scaled(e) - q.scaled(model.point(x)) for e in ends]) / steps
+                for n, q in self.quantities.items()
+            }
             out.append((x, data, c[0], sensitivity, gradients))
         return out
 
@@ -511,6 +537,63 @@ class _Planner:
             }
             out[name]["precision"] = precision_words(quantity, out[name])
         return out
+
+    def _unsettled(
+        self,
+        predicted: list[dict[str, dict[str, Any]]],
+        alternatives: list[dict[str, Any]],
+        far: np.ndarray,
+        shrink: list[dict[str, tuple[float, float]]],
+        tests: list[dict[str, Any]],
+    ) -> list[dict[str, Any]]:
+        """The quantities with an open side no candidate is predicted to close
+        (``predicted``, ``shrink``: every test's, the reference's last; ``far``:
+        :meth:`_at_open_sides`'s), each with why (``reason``, a key of :data:`UNSETTLED`):
+        at the side's re-fit (where the profile ended it, at a range's end) no candidate
+        sees the quantity — a coat of a larger plastic moment yields in none of them — and
+        none settles it near today's fit either; or one settles it near today's fit only
+        (``near_fit``: the test that narrows its linear interval most there): the side
+        closes where the coat's value lies where that test still sees it, which the
+        curves cannot say today; or the other parameters re-fit to every test that sees
+        it at the side's end. ``ends``: the quantity at each such side's re-fit."""
+        at = {(a["quantity"], a["side"]): k for k, a in enumerate(alternatives)}
+        found = []
+        for name, quantity in self.quantities.items():
+            entry = self.entries[name]
+            sides = [
+                side
+                for side in ("low", "high")
+                if entry[side] is None and all(p[name][side] is None for p in predicted)
+            ]
+            if not sides:
+                continue
+            why, ends, near = [], {}, None
+            for side in sides:
+                k = at.get((name, side))
+                if k is None:
+                    why.append("no re-fit")
+                    continue
+                theta = np.array([alternatives[k]["params"][n] for n in self.problem.space.names])
+                ends[side] = quantity.unscaled(quantity.scaled(theta))
+                reach = abs(quantity.scaled(theta) - quantity.scale(entry["value"]))
+                # NaN (a closed side, a failed run) is not seen
+                why.append("absorbed" if np.any(far[k] < reach) else "insensitive")
+            best = min(range(len(tests)), key=lambda t: shrink[t][name][0])
+            if "insensitive" in why and shrink[best][name][0] < SETTLES:
+                why, near = ["near_fit"], as_json(tests[best])
+            reason = next(r for r in UNSETTLED if r in why)
+            found.append(
+                {
+                    "quantity": name,
+                    "kind": entry["kind"],
+                    "now": _interval_words(entry),
+                    "sides": sides,
+                    "ends": ends,
+                    "reason": reason,
+                    "near_fit": near,
+                }
+            )
+        return found
 
     def _default_goal(self, predicted: list[dict[str, dict[str, Any]]]) -> str | None:
         """The least determined quantity (the widest share of its range) some candidate
@@ -649,6 +732,7 @@ class _Planner:
         reference: dict[str, Any],
         untestable: list[dict[str, Any]],
         inseparable: list[dict[str, Any]],
+        unsettled: list[dict[str, Any]],
     ) -> str:
         varied = self.design.conditions
         if goal is None or not recommended:
@@ -665,6 +749,15 @@ class _Planner:
                 f"{best['replicates']} more of the reference test: {again['precision']})"
                 + (f", and narrows {', '.join(others)}" if others else "")
             )
+        for reason, words in UNSETTLED.items():
+            items = [i for i in unsettled if i["reason"] == reason]
+            if items:
+                named = ", ".join(
+                    f"{i['quantity']} ({'free' if i['kind'] == 'free' else i['now']})"
+                    for i in items
+                )
+                lead = "" if reason == "near_fit" else "no test inside [design] settles "
+                text += f"; {lead}{named}: {words}"
         for item in untestable:
             test = item["test"]
             how = test if isinstance(test, str) else f"a test at {conditions_text(test)}"
