@@ -195,7 +195,9 @@ def run_case(task: tuple[int, int]) -> dict[str, Any]:
         "realised_over_predicted": None if got is None or predicted <= 0 else got / predicted,
         # "no test inside [design] settles X": every open side it names, against the
         # recalibrations with each added test (all inside [design])
-        "unsettled": [(u["quantity"], side) for u in advice.unsettled for side in u["sides"]],
+        "unsettled": [
+            (u["quantity"], side, u["reason"]) for u in advice.unsettled for side in u["sides"]
+        ],
         "unsettled_closed": closed,
         "message": advice.message,
     }
@@ -204,8 +206,9 @@ def run_case(task: tuple[int, int]) -> dict[str, Any]:
 def _closed_sides(
     unsettled: list[dict[str, Any]], entries: dict[str, Any], truths: dict[str, float], tag: str
 ) -> list[dict[str, Any]]:
-    """The open sides next-test said no test closes that the recalibration with test
-    ``tag`` closed, each with whether the closed side holds the truth."""
+    """The open sides next-test said no candidate is predicted to close that the
+    recalibration with test ``tag`` closed, each with next-test's reason and whether the
+    closed side holds the truth."""
     found = []
     for item in unsettled:
         entry = entries[item["quantity"]]
@@ -214,7 +217,13 @@ def _closed_sides(
                 truth = truths[item["quantity"]]
                 holds = truth >= entry[side] if side == "low" else truth <= entry[side]
                 found.append(
-                    {"quantity": item["quantity"], "side": side, "test": tag, "holds": holds}
+                    {
+                        "quantity": item["quantity"],
+                        "side": side,
+                        "reason": item["reason"],
+                        "test": tag,
+                        "holds": holds,
+                    }
                 )
     return found
 
@@ -278,7 +287,10 @@ def main() -> None:
         "beats_reference_2x": sum(r["beats_reference_2x"] for r in done),
         "beats_random_2x": sum(r["beats_random_2x"] for r in done),
         "within_1_5_of_predicted": sum(1 / 1.5 <= x <= 1.5 for x in ratios),
+        # "no test inside [design] settles it" (insensitive, absorbed) is refuted by a closure;
+        # "only near today's fit" (near_fit) is not: there a closure is the case it names
         "unsettled_sides": sum(len(r["unsettled"]) for r in done),
+        "no_test_settles_claims": sum(u[2] != "near_fit" for r in done for u in r["unsettled"]),
         "unsettled_closed_by_an_added_test": [
             {"truth": "/".join(map(str, r["truth"].values())), **c}
             for r in done
