@@ -67,8 +67,8 @@ UNSETTLED = {
     "ended their open sides, so it closes them only if the coat lies where it still sees them",
     "absorbed": "the other parameters re-fit to each test sensitive to them where the profiles "
     "ended their open sides",
-    "insensitive": "none of the tests is sensitive to them where the profiles ended their open "
-    "sides, nor near today's fit",
+    "insensitive": "none is sensitive to them near today's fit or where the profiles ended their "
+    "open sides (a linear judgement: where the coat lies elsewhere, one may still close them)",
     "no re-fit": "the profiles left no re-fit at their open sides' ends to weigh the tests against",
 }
 UNRECORDED: dict[str, Any] = {"direction": "warp", "tension_n": 0.0, "rate_deg_s": 90.0}
@@ -756,7 +756,11 @@ class _Planner:
                     f"{i['quantity']} ({'free' if i['kind'] == 'free' else i['now']})"
                     for i in items
                 )
-                lead = "" if reason == "near_fit" else "no test inside [design] settles "
+                lead = (
+                    ""
+                    if reason == "near_fit"
+                    else "no test inside [design] is predicted to settle "
+                )
                 text += f"; {lead}{named}: {words}"
         for item in untestable:
             test = item["test"]
