@@ -76,6 +76,7 @@ TRUTHS = (  # no plateau at 10 mm, or Tcoat free: coats over the paper's ranges
     {"ecoat_gpa": 1.5, "scoat_gpa": 0.3, "tcoat_mm": 0.03},
 )
 NOISE_N = 0.05
+NOT_SETTLED = ("insensitive", "absorbed", "range_end")  # next-test's left_open reasons
 
 
 def _width(path: Path, name: str, entry: dict[str, Any]) -> float:
@@ -167,7 +168,7 @@ def run_case(task: tuple[int, int]) -> dict[str, Any]:
                 realised[tag] = {"status": again.status}
                 continue
             entries = {**again.determination["combinations"], **again.determination["intervals"]}
-            closed += _closed_sides(advice.unsettled, entries, true_values, tag)
+            closed += _closed_sides(advice.left_open, entries, true_values, tag)
             entry = entries[goal]
             realised[tag] = {
                 "width": _width(again_path, goal, entry),
@@ -195,22 +196,24 @@ def run_case(task: tuple[int, int]) -> dict[str, Any]:
         "realised_over_predicted": None if got is None or predicted <= 0 else got / predicted,
         # "no test inside [design] settles X": every open side it names, against the
         # recalibrations with each added test (all inside [design])
-        "unsettled": [
-            (u["quantity"], side, u["reason"]) for u in advice.unsettled for side in u["sides"]
+        "left_open": [
+            (u["quantity"], side, why)
+            for u in advice.left_open
+            for side, why in u["reasons"].items()
         ],
-        "unsettled_closed": closed,
+        "left_open_closed": closed,
         "message": advice.message,
     }
 
 
 def _closed_sides(
-    unsettled: list[dict[str, Any]], entries: dict[str, Any], truths: dict[str, float], tag: str
+    left_open: list[dict[str, Any]], entries: dict[str, Any], truths: dict[str, float], tag: str
 ) -> list[dict[str, Any]]:
     """The open sides next-test said no candidate is predicted to close that the
     recalibration with test ``tag`` closed, each with next-test's reason and whether the
     closed side holds the truth."""
     found = []
-    for item in unsettled:
+    for item in left_open:
         entry = entries[item["quantity"]]
         for side in item["sides"]:
             if entry[side] is not None:
@@ -220,7 +223,7 @@ def _closed_sides(
                     {
                         "quantity": item["quantity"],
                         "side": side,
-                        "reason": item["reason"],
+                        "reason": item["reasons"][side],
                         "test": tag,
                         "holds": holds,
                     }
@@ -287,14 +290,18 @@ def main() -> None:
         "beats_reference_2x": sum(r["beats_reference_2x"] for r in done),
         "beats_random_2x": sum(r["beats_random_2x"] for r in done),
         "within_1_5_of_predicted": sum(1 / 1.5 <= x <= 1.5 for x in ratios),
-        # "no test inside [design] settles it" (insensitive, absorbed) is refuted by a closure;
-        # "only near today's fit" (near_fit) is not: there a closure is the case it names
-        "unsettled_sides": sum(len(r["unsettled"]) for r in done),
-        "no_test_settles_claims": sum(u[2] != "near_fit" for r in done for u in r["unsettled"]),
-        "unsettled_closed_by_an_added_test": [
+        # "no candidate is predicted to settle it" for want of sensitivity or because the
+        # other parameters absorb it (insensitive, absorbed, range_end) is refuted by a
+        # closure; "only near today's fit" (near_fit) is not: there a closure is the case
+        # it names
+        "left_open_sides": sum(len(r["left_open"]) for r in done),
+        "not_predicted_to_settle_claims": sum(
+            u[2] in NOT_SETTLED for r in done for u in r["left_open"]
+        ),
+        "left_open_closed_by_an_added_test": [
             {"truth": "/".join(map(str, r["truth"].values())), **c}
             for r in done
-            for c in r["unsettled_closed"]
+            for c in r["left_open_closed"]
         ],
         "realised_over_predicted": ratios,
         "untestable": untestable,

@@ -61,15 +61,17 @@ SETTLES = 0.9  # a candidate settles a quantity where it cuts its interval's wid
 # what a test that does not record a condition was run at (the rig's and the effects' own)
 SEEN_SHARE = 1e-3  # a test that narrows a quantity by less than this share there sees nothing
 PRIOR_UNIT = 0.5  # a Gaussian prior of this share of each range keeps unseen ones finite
-# why no candidate closes an open side (``NextTestResult.unsettled``), the first that applies
-UNSETTLED = {
-    "near_fit": "a test inside [design] sees them near today's fit but not where the profiles "
-    "ended their open sides, so it closes them only if the coat lies where it still sees them",
-    "absorbed": "the other parameters re-fit to each test sensitive to them where the profiles "
-    "ended their open sides",
-    "insensitive": "none is sensitive to them near today's fit or where the profiles ended their "
-    "open sides (a linear judgement: where the coat lies elsewhere, one may still close them)",
-    "no re-fit": "the profiles left no re-fit at their open sides' ends to weigh the tests against",
+# why no candidate is predicted to close an open side (``NextTestResult.left_open``)
+LEFT_OPEN = {
+    "near_fit": "a candidate inside [design] sees it near today's fit but not where the profile "
+    "ended the side, so it closes the side only if the coat lies where it still sees it",
+    "insensitive": "no candidate inside [design] is sensitive to it near today's fit or where "
+    "the profile ended the side (a linear judgement: where the coat lies elsewhere, one may "
+    "still close it)",
+    "absorbed": "the other parameters re-fit to each candidate sensitive to it where the "
+    "profile ended the side",
+    "range_end": "a candidate moves the side's end in, not off the range's end",
+    "no re-fit": "the profile left no re-fit at the side's end to weigh the candidates against",
 }
 UNRECORDED: dict[str, Any] = {"direction": "warp", "tension_n": 0.0, "rate_deg_s": 90.0}
 
@@ -90,12 +92,12 @@ class NextTestResult:
     the same for the replicates of the reference test (the measurements' first), the
     baseline. ``untestable``: effects whose condition never varies in the data, each
     ``{effect, reason, test}``; ``inseparable``: pairs no candidate tells apart, each
-    ``{effects, largest_difference_n, at, reason}``; ``unsettled``: the quantities with a
-    side the data leave open that no candidate closes, each ``{quantity, kind, now,
-    sides, ends, reason, near_fit}`` (``now`` today's interval in words, ``sides`` the open
-    sides no test is predicted to close, ``ends`` the quantity at each one's re-fit,
-    ``reason`` a key of :data:`UNSETTLED`, ``near_fit`` the test that settles it near
-    today's fit where that is the reason). ``candidates`` counts the tests
+    ``{effects, largest_difference_n, at, reason}``; ``left_open``: the quantities with a
+    side the data leave open that no candidate is predicted to close, each ``{quantity,
+    kind, now, sides, ends, reasons, near_fit}`` (``now`` today's interval in words,
+    ``sides`` those sides, ``ends`` the quantity at each one's re-fit, ``reasons`` each
+    side's key of :data:`LEFT_OPEN`, ``near_fit`` the candidate that settles it near
+    today's fit, where that is a side's reason). ``candidates`` counts the tests
     ranked, ``solver_calls`` the built-in runs it took; ``figure`` the PNG of the
     recommended test's curves; ``notes`` what the ranking ran on.
     """
@@ -111,7 +113,7 @@ class NextTestResult:
     figure: str | None
     message: str
     notes: list[str] = field(default_factory=list)
-    unsettled: list[dict[str, Any]] = field(default_factory=list)
+    left_open: list[dict[str, Any]] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -314,13 +316,13 @@ class _Planner:
         reference = entry(len(tests) - 1)
         inseparable = self._inseparable(pairs, pair_curves, tests)
         untestable = self._untestable()
-        unsettled = self._unsettled(predicted, alternatives, far, shrink, tests)
+        left_open = self._left_open(predicted, alternatives, refit, far, shrink, tests)
         figure = (
             None
             if output_dir is False or not recommended
             else self._figure(tests[order[0]], curves[:, order[0]], alternatives, goal, output_dir)
         )
-        message = self._message(goal, recommended, reference, untestable, inseparable, unsettled)
+        message = self._message(goal, recommended, reference, untestable, inseparable, left_open)
         return NextTestResult(
             study=calibration_study_name(self.problem.spec, chosen),
             goal=goal,
@@ -332,7 +334,7 @@ class _Planner:
             solver_calls=len(self.used),
             figure=figure,
             message=message,
-            unsettled=unsettled,
+            left_open=left_open,
             notes=[
                 "ranked on the built-in model"
                 + (
@@ -398,9 +400,9 @@ class _Planner:
         for (x, shifted, data), c in zip(at, curves, strict=True):
             steps = np.array([step for _, step in shifted])
             sensitivity = np.nan_to_num((c[1:] - c[0]) / steps[:, None, None]).transpose(1, 2, 0)
-            ends = [model.point(z) for z, _ in shifted]
+            ends, start = [model.point(z) for z, _ in shifted], model.point(x)
             gradients = {
-                n: np.array([q.scaled(e) - q.scaled(model.point(x)) for e in ends]) / steps
+                n: np.array([q.scaled(e) - q.scaled(start) for e in ends]) / steps
                 for n, q in self.quantities.items()
             }
             out.append((x, data, c[0], sensitivity, gradients))
@@ -538,24 +540,25 @@ class _Planner:
             out[name]["precision"] = precision_words(quantity, out[name])
         return out
 
-    def _unsettled(
+    def _left_open(
         self,
         predicted: list[dict[str, dict[str, Any]]],
         alternatives: list[dict[str, Any]],
+        refit: np.ndarray,
         far: np.ndarray,
         shrink: list[dict[str, tuple[float, float]]],
         tests: list[dict[str, Any]],
     ) -> list[dict[str, Any]]:
         """The quantities with an open side no candidate is predicted to close
-        (``predicted``, ``shrink``: every test's, the reference's last; ``far``:
-        :meth:`_at_open_sides`'s), each with why (``reason``, a key of :data:`UNSETTLED`):
-        at the side's re-fit (where the profile ended it, at a range's end) no candidate
-        sees the quantity — a coat of a larger plastic moment yields in none of them — and
-        none settles it near today's fit either; or one settles it near today's fit only
-        (``near_fit``: the test that narrows its linear interval most there): the side
-        closes where the coat's value lies where that test still sees it, which the
-        curves cannot say today; or the other parameters re-fit to every test that sees
-        it at the side's end. ``ends``: the quantity at each such side's re-fit."""
+        (``predicted``, ``shrink``: every test's, the reference's last; ``refit``, ``far``:
+        :meth:`_at_open_sides`'s), each with why, side by side (``reasons``, keys of
+        :data:`LEFT_OPEN`), as :meth:`_predicted` decided it: at the side's re-fit (where
+        the profile ended it, at a range's end) no candidate sees the quantity —
+        ``near_fit`` where one settles it near today's fit (``near_fit``: the candidate
+        that narrows its linear interval most there), ``insensitive`` where none does; a
+        candidate sees it there but the other parameters re-fit to it at that value
+        (``absorbed``); or one moves the side in, not off the range's end (``range_end``).
+        ``ends``: the quantity at each side's re-fit."""
         at = {(a["quantity"], a["side"]): k for k, a in enumerate(alternatives)}
         found = []
         for name, quantity in self.quantities.items():
@@ -567,21 +570,31 @@ class _Planner:
             ]
             if not sides:
                 continue
-            why, ends, near = [], {}, None
+            q0 = quantity.scale(entry["value"])
+            best = min(range(len(tests) - 1), key=lambda t: shrink[t][name][0])
+            near = shrink[best][name][0] < SETTLES
+            reasons, ends = {}, {}
             for side in sides:
                 k = at.get((name, side))
                 if k is None:
-                    why.append("no re-fit")
+                    reasons[side] = "no re-fit"
                     continue
-                theta = np.array([alternatives[k]["params"][n] for n in self.problem.space.names])
-                ends[side] = quantity.unscaled(quantity.scaled(theta))
-                reach = abs(quantity.scaled(theta) - quantity.scale(entry["value"]))
-                # NaN (a closed side, a failed run) is not seen
-                why.append("absorbed" if np.any(far[k] < reach) else "insensitive")
-            best = min(range(len(tests)), key=lambda t: shrink[t][name][0])
-            if "insensitive" in why and shrink[best][name][0] < SETTLES:
-                why, near = ["near_fit"], as_json(tests[best])
-            reason = next(r for r in UNSETTLED if r in why)
+                alt = alternatives[k]
+                theta = np.array([alt["params"][n] for n in self.problem.space.names])
+                ends[side] = quantity.value(theta)
+                reach = abs(quantity.scaled(theta) - q0)
+                ratio = 0.0 if alt["ratio"] is None else max(float(alt["ratio"]), 0.0)
+                seen = far[k] < reach  # NaN (a failed run) is not seen
+                moved = [
+                    moved_side(reach, ratio, float(refit[k, t]), self.threshold) is not None
+                    for t in np.flatnonzero(seen)
+                ]
+                if any(moved):
+                    reasons[side] = "range_end"
+                elif moved:
+                    reasons[side] = "absorbed"
+                else:
+                    reasons[side] = "near_fit" if near else "insensitive"
             found.append(
                 {
                     "quantity": name,
@@ -589,8 +602,8 @@ class _Planner:
                     "now": _interval_words(entry),
                     "sides": sides,
                     "ends": ends,
-                    "reason": reason,
-                    "near_fit": near,
+                    "reasons": reasons,
+                    "near_fit": as_json(tests[best]) if "near_fit" in reasons.values() else None,
                 }
             )
         return found
@@ -732,7 +745,7 @@ class _Planner:
         reference: dict[str, Any],
         untestable: list[dict[str, Any]],
         inseparable: list[dict[str, Any]],
-        unsettled: list[dict[str, Any]],
+        left_open: list[dict[str, Any]],
     ) -> str:
         varied = self.design.conditions
         if goal is None or not recommended:
@@ -749,19 +762,14 @@ class _Planner:
                 f"{best['replicates']} more of the reference test: {again['precision']})"
                 + (f", and narrows {', '.join(others)}" if others else "")
             )
-        for reason, words in UNSETTLED.items():
-            items = [i for i in unsettled if i["reason"] == reason]
-            if items:
-                named = ", ".join(
-                    f"{i['quantity']} ({'free' if i['kind'] == 'free' else i['now']})"
-                    for i in items
-                )
-                lead = (
-                    ""
-                    if reason == "near_fit"
-                    else "no test inside [design] is predicted to settle "
-                )
-                text += f"; {lead}{named}: {words}"
+        for reason, words in LEFT_OPEN.items():
+            named = [
+                _side_words(item, reason)
+                for item in left_open
+                if reason in item["reasons"].values()
+            ]
+            if named:
+                text += f"; {', '.join(named)} — each: {words}"
         for item in untestable:
             test = item["test"]
             how = test if isinstance(test, str) else f"a test at {conditions_text(test)}"
@@ -840,6 +848,15 @@ def precision_words(quantity: Any, entry: Mapping[str, Any]) -> str:
         return _interval_words(entry) + (" only" if entry["low"] or entry["high"] else "")
     half = entry["width_after"] / 2
     return f"±{100 * math.expm1(half):.2g} %" if quantity.log else f"±{half:.3g}"
+
+
+def _side_words(item: Mapping[str, Any], reason: str) -> str:
+    """A quantity left open, in words, for the sides of it whose reason is ``reason``: the
+    quantity and today's interval where every such side has it, else the side."""
+    sides = [side for side, why in item["reasons"].items() if why == reason]
+    if len(sides) == len(item["sides"]):
+        return f"{item['quantity']} ({'free' if item['kind'] == 'free' else item['now']})"
+    return f"{item['quantity']}'s {'upper' if sides[0] == 'high' else 'lower'} side"
 
 
 def _interval_words(entry: Mapping[str, Any]) -> str:

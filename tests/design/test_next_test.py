@@ -142,27 +142,26 @@ def test_the_recommended_test_settles_more_than_replicates_of_the_reference(cali
     assert out["figure"] and out["figure"].endswith("np-next-test.png")
 
 
-
 def test_an_open_side_no_test_is_predicted_to_close_is_said_and_why(calibrated):
     """Mp bounded from below only: the 5 mm test makes today's coat yield, not the coat at
     the open side's end; the answer names Mp, the side, where it ends and the test that
     sees it near today's fit — not a silent switch to another goal."""
     path, result = calibrated
     advice = surrogate.next_test(path, plots=False, progress=False)
-    unsettled = {u["quantity"]: u for u in advice.unsettled}
-    assert "plastic_moment_n" in unsettled, advice.message
-    mp = unsettled["plastic_moment_n"]
+    left_open = {u["quantity"]: u for u in advice.left_open}
+    assert "plastic_moment_n" in left_open, advice.message
+    mp = left_open["plastic_moment_n"]
     fit = result.determination["combinations"]["plastic_moment_n"]
     assert mp["sides"] == ["high"] and mp["kind"] == "lower-bound"
     assert mp["ends"]["high"] > 1.5 * fit["value"]
-    assert mp["reason"] == "near_fit" and mp["near_fit"]["bending_length_mm"] == 5.0
+    assert mp["reasons"] == {"high": "near_fit"} and mp["near_fit"]["bending_length_mm"] == 5.0
     assert f"plastic_moment_n (≥ {fit['low']:.4g})" in advice.message
     # said only of what no candidate is predicted to close: consistent with every prediction
     for entry in [*advice.recommended, advice.reference]:
-        for item in advice.unsettled:
+        for item in advice.left_open:
             for side in item["sides"]:
                 assert entry["predicted"][item["quantity"]][side] is None
-    assert json.loads(json.dumps(advice.to_json()))["unsettled"] == advice.unsettled
+    assert json.loads(json.dumps(advice.to_json()))["left_open"] == advice.left_open
 
 
 def test_an_unknown_goal_names_the_quantities(calibrated):
