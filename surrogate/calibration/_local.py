@@ -55,7 +55,6 @@ __all__ = [
     "optimum_test",
 ]
 
-HELD_RTOL = 1e-12  # a difference's point this near the one it starts from: the range held it
 FD_STEP_UNIT = 1e-3  # 0.1 % of a range: far above the solver's 1e-9 Newton tolerance
 ROUGH_CHI2 = 2.0  # a promise the solver does not deliver, and under two units of χ²: resolved
 MIN_FD_STEP_UNIT = 1e-6  # the smallest it shrinks to where a Jacobian was not trusted
@@ -334,9 +333,7 @@ class ResidualModel:
         step = self.fd_step if x[j] + self.fd_step <= 1.0 else -self.fd_step
         shifted = x.copy()
         shifted[j] += step
-        # held: the range gives the point back, to rounding (4.0 → 4.0 − 8.9e-16 at Ecoat's
-        # upper bound: not the same bits, and an outward step there was a zero column)
-        held = np.allclose(self.point(shifted), self.point(x), rtol=HELD_RTOL, atol=0.0)
+        held = np.array_equal(self.point(shifted), self.point(x))
         if held or (  # …or near its bound, where the other side lies within the box
             self.coordinates.crosses_a_bound(x, shifted) and 0.0 <= x[j] - step <= 1.0
         ):
