@@ -518,13 +518,8 @@ class _Planner:
                 if size is not None:
                     size *= ratio_info
                 elif k is not None and np.all(np.isfinite(curves[k])):
-                    alt = alternatives[k - 1]
-                    theta = np.array([alt["params"][n] for n in self.problem.space.names])
-                    reach = abs(quantity.scaled(theta) - q0)
-                    chi2 = float(refit[k - 1])
-                    ratio = 0.0 if alt["ratio"] is None else max(float(alt["ratio"]), 0.0)
-                    sees = far[k - 1] < reach  # it sees the quantity where the side ends
-                    if sees and moved_side(reach, ratio, chi2, self.threshold) is not None:
+                    reach = self._reach(quantity, q0, alternatives[k - 1])
+                    if self._moves(alternatives[k - 1], reach, refit[k - 1], far[k - 1]):
                         size = min(reach, max(half_after, far[k - 1]))
                 ends[side] = None if size is None else end_value(quantity, q0, sign, size)
             now = _width(quantity, entry["low"], entry["high"])
@@ -539,6 +534,26 @@ class _Planner:
             }
             out[name]["precision"] = precision_words(quantity, out[name])
         return out
+
+    def _params(self, alternative: Mapping[str, Any]) -> np.ndarray:
+        return np.array([alternative["params"][n] for n in self.problem.space.names])
+
+    def _reach(self, quantity: Any, q0: float, alternative: Mapping[str, Any]) -> float:
+        """How far (declared scale) from today's fit ``q0`` a side's re-fit lies."""
+        return abs(quantity.scaled(self._params(alternative)) - q0)
+
+    def _moves(
+        self, alternative: Mapping[str, Any], reach: float, chi2: float, far: float
+    ) -> bool | None:
+        """Whether a test moves an open side in: None where it does not see the quantity at
+        the side's re-fit (``far`` not under ``reach``; NaN, a failed run, is not seen), else
+        whether what it adds there once the other parameters re-fit (``chi2``, of
+        :func:`~._information.refit_chi2`) lifts the re-fit over the threshold
+        (:func:`~._information.moved_side`)."""
+        if not far < reach:
+            return None
+        ratio = 0.0 if alternative["ratio"] is None else max(float(alternative["ratio"]), 0.0)
+        return moved_side(reach, ratio, float(chi2), self.threshold) is not None
 
     def _left_open(
         self,
@@ -580,18 +595,12 @@ class _Planner:
                     reasons[side] = "no re-fit"
                     continue
                 alt = alternatives[k]
-                theta = np.array([alt["params"][n] for n in self.problem.space.names])
-                ends[side] = quantity.value(theta)
-                reach = abs(quantity.scaled(theta) - q0)
-                ratio = 0.0 if alt["ratio"] is None else max(float(alt["ratio"]), 0.0)
-                seen = far[k] < reach  # NaN (a failed run) is not seen
-                moved = [
-                    moved_side(reach, ratio, float(refit[k, t]), self.threshold) is not None
-                    for t in np.flatnonzero(seen)
-                ]
-                if any(moved):
+                ends[side] = quantity.value(self._params(alt))
+                reach = self._reach(quantity, q0, alt)
+                moves = [self._moves(alt, reach, refit[k, t], far[k, t]) for t in range(len(tests))]
+                if any(moves):
                     reasons[side] = "range_end"
-                elif moved:
+                elif any(m is not None for m in moves):
                     reasons[side] = "absorbed"
                 else:
                     reasons[side] = "near_fit" if near else "insensitive"
