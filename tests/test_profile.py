@@ -16,6 +16,7 @@ in the tensioned curves that a larger Scoat takes away, unseen (cover-005 of 240
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -26,8 +27,10 @@ from surrogate.calibration._calibrate import run_calibration
 from surrogate.calibration._problem import coat_section
 from surrogate.calibration._profile import (
     Profile,
+    Profiler,
     ProfileSide,
     Quantity,
+    _flat,
     _leap,
     _ranged,
     _Step,
@@ -236,6 +239,86 @@ def test_a_leap_needs_a_flat_stretch_of_the_sides_own_refits():
     assert not _leap(_step(0.0488, 523.0), _step(0.0431, 0.18), stretch)  # another's point
     rising = [_step(0.02, 0.2), _step(0.04, 0.7)]
     assert not _leap(_step(0.05, 523.0), rising[-1], rising)
+
+
+def test_a_stretch_is_flat_where_rho_rose_less_than_a_power_of_the_way_out():
+    """Half the way out, ``ρ`` risen at most 1.25 × (a quadratic rise gives 4 ×), as before;
+    from a re-fit nearer, at least 1/1.2 of the way in, at most the same power (0.32) of the
+    distances' ratio — cover-089 of 240: k_s's re-fits at ρ 0.7099 at −0.112, −0.135 and
+    −0.137, none half the way in."""
+    assert _flat(_step(0.1374, 0.7099), [_step(0.1124, 0.7099)])
+    assert _flat(_step(1.454, 0.4598), [_step(1.104, 0.5377)])  # cover-218's Tcoat: fell
+    assert not _flat(_step(0.1374, 0.7099), [_step(0.125, 0.7)])  # too near to tell
+    assert not _flat(_step(0.1374, 0.75), [_step(0.1124, 0.5)])  # a quadratic rise: 1.49 ×
+    assert not _flat(_step(0.1374, 0.7099), [_step(0.1124, 0.6)])  # 1.18 × over 1.22: > 1.07
+    assert _flat(_step(0.4, 0.5), [_step(0.2, 0.41)])  # half the way: 1.22 ×
+    assert not _flat(_step(0.4, 0.6), [_step(0.2, 0.41)])
+    assert not _flat(_step(0.8, 0.6), [_step(0.2, 0.41)])  # farther: still 1.25 × at most
+
+
+class _Scripted(Profiler):
+    """A profiler whose re-fits of a side are a script of ``(|η| reached, ρ, held)``, from a
+    point under the threshold another profile found (``under``): the side's rules alone."""
+
+    def __init__(self, under, script, polished=None):
+        self.model = SimpleNamespace(
+            point=lambda x: x, problem=SimpleNamespace(space=SimpleNamespace(names=["t"]))
+        )
+        self.optimum = SimpleNamespace(x=np.zeros(1), jacobian=np.zeros((2, 1)))
+        self.seen, self.under, self.script = [], under, iter(script)
+        self.polish = polished or {}  # |η| → ρ after a fresh Jacobian
+
+    def _farthest_under(self, quantity, q0, sign):
+        size, ratio = self.under
+        return _Step(size, ratio, np.array([size]), np.zeros((2, 1)), False)
+
+    def _refit(self, quantity, target, start, jac, evaluations, relearn=False):
+        return np.array([target]), jac, None
+
+    def _step(self, quantity, q0, sign, x, jac):
+        size, ratio, held = next(self.script)
+        return _Step(size, ratio, np.array([size]), jac, held)
+
+    def _polished(self, quantity, target, q0, sign, found):
+        if found.size not in self.polish:
+            return found  # (a polish that lowered nothing)
+        return _Step(found.size, self.polish[found.size], found.x, found.jac, found.held)
+
+    def _unheld(self, x):
+        return bool(self.polish)  # (a modulus moved off its bound: polish a re-fit over)
+
+    def _walled(self, quantity, q0, sign, end):
+        return False
+
+
+def test_an_end_whose_confirmation_lies_lower_is_no_end():
+    """cover-046 of 240 (tried with the upper bounds' differences held to rounding): Tcoat's
+    upper side from a point another profile found at +0.1132 in log Tcoat (ρ 0.68); the
+    re-fit at +0.1151 drove Scoat onto its bound, ρ 111.5, a bracket narrow enough to be
+    the end; the step beyond, +0.2302, lay lower, ρ 16.45 — and the truth, at +0.505,
+    fits at ρ 0.21. The misfit falls beyond that end: the side is not checked, no end is
+    stated. A confirmation that rises on still ends it."""
+    tcoat = Quantity("t", lambda theta: float(theta[0]), False, -1.0, 1.5)
+    falls = _Scripted((0.1132, 0.676), [(0.1151, 111.5, True), (0.2302, 16.45, False)])
+    side = falls._side(tcoat, 1.0, None)
+    assert side.end is None and side.method == "unchecked", side
+    rises = _Scripted((0.1132, 0.676), [(0.1151, 111.5, True), (0.2302, 500.0, False)])
+    side = rises._side(tcoat, 1.0, None)
+    assert side.method == "profile" and side.end == pytest.approx(0.1151), side
+
+
+def test_a_leap_a_polish_brought_down_but_not_under_the_threshold_ends_no_side():
+    """cover-089 of 240 (tried with the upper bounds' differences held to rounding): k_s's
+    lower side, ρ 3.9·10⁴ at the range's end (polished: 55.75), 0.7099 at −0.112, −0.135
+    and −0.137, then 714 at −0.148 — a leap beyond a flat stretch, which a fresh Jacobian
+    brought to 2.3, no nearer the threshold than an unsettled re-fit; "k_s ≥" there missed
+    the truth, which lies beyond. The side is not checked: no end is stated."""
+    k_s = Quantity("t", lambda theta: float(theta[0]), False, -0.1579, 0.0421)
+    script = [(0.1579, 3.9e4, False), *[(s, 0.7099, False) for s in (0.1124, 0.1351, 0.1374)]]
+    script += [(0.1476, 714.0, False), (0.1579, 3.9e4, False)]
+    profiler = _Scripted((0.0, 0.0), script, polished={0.1579: 55.75, 0.1476: 2.316})
+    side = profiler._side(k_s, -1.0, None)
+    assert side.end is None and side.method == "unchecked", side
 
 
 @pytest.mark.slow
