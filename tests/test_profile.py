@@ -20,7 +20,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from scipy import stats
 
 import surrogate
 from surrogate.calibration._calibrate import run_calibration
@@ -42,6 +41,7 @@ from surrogate.calibration._synthetic import (
     coverage_sets,
     synthetic_measurements,
     true_parameters,
+    truth_ratio,
     write_calibration_study,
 )
 from surrogate.physics import bending_stiffness
@@ -49,15 +49,6 @@ from surrogate.study._space import ParameterSpec
 
 SETS = {count: {case["name"]: case for case in coverage_sets(count)} for count in (120, 240)}
 DEEP = 0.6  # the truth's misfit above the fit's, at most (a share of the threshold)
-
-
-def _rho(case, path, fitted):
-    """The truth's misfit above the fit's, in units of the 95 % threshold ``t²·s²``."""
-    truth = surrogate.compare(path, params=true_parameters(case), plots=False, progress=False)
-    points = 91 * len(case["tests"])  # 0–90° every degree
-    dof = points - len(true_parameters(case))
-    t2 = float(stats.t.ppf(0.975, dof)) ** 2
-    return dof * ((truth.rmse_n / fitted.rmse_n) ** 2 - 1.0) / t2
 
 
 @pytest.mark.slow
@@ -75,7 +66,7 @@ def test_every_interval_holds_a_truth_deep_inside_the_region(tmp_path, count, na
     path = write_calibration_study(tmp_path, case, seed=case["study_seed"])
     result = surrogate.calibrate(path, progress=False, record=False)
     assert result.status == "converged", result.message
-    rho = _rho(case, path, result)
+    rho = truth_ratio(case, path, result.rmse_n)
     assert rho < DEEP, rho  # the premise: the curves cannot tell the truth from the fit
     entries = {**result.determination["combinations"], **result.determination["intervals"]}
     for quantity, value in true_parameters(case).items():
