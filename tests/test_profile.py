@@ -66,7 +66,7 @@ def test_every_interval_holds_a_truth_deep_inside_the_region(tmp_path, count, na
     path = write_calibration_study(tmp_path, case, seed=case["study_seed"])
     result = surrogate.calibrate(path, progress=False, record=False)
     assert result.status == "converged", result.message
-    rho = truth_ratio(case, path, result.rmse_n)
+    rho = truth_ratio(case, path, result)
     assert rho < DEEP, rho  # the premise: the curves cannot tell the truth from the fit
     entries = {**result.determination["combinations"], **result.determination["intervals"]}
     for quantity, value in true_parameters(case).items():
@@ -251,13 +251,14 @@ class _Scripted(Profiler):
     """A profiler whose re-fits of a side are a script of ``(|η| reached, ρ, held)``, from a
     point under the threshold another profile found (``under``): the side's rules alone."""
 
-    def __init__(self, under, script, polished=None):
+    def __init__(self, under, script, polished=None, unheld=False):
         self.model = SimpleNamespace(
             point=lambda x: x, problem=SimpleNamespace(space=SimpleNamespace(names=["t"]))
         )
         self.optimum = SimpleNamespace(x=np.zeros(1), jacobian=np.zeros((2, 1)))
         self.seen, self.under, self.script = [], under, iter(script)
         self.polish = polished or {}  # |η| → ρ after a fresh Jacobian
+        self.moved = unheld  # a modulus moved off its bound: a re-fit over is polished
 
     def _farthest_under(self, quantity, q0, sign):
         size, ratio = self.under
@@ -268,6 +269,7 @@ class _Scripted(Profiler):
 
     def _step(self, quantity, q0, sign, x, jac):
         size, ratio, held = next(self.script)
+        assert abs(x[0]) == pytest.approx(size, rel=2e-3)  # the step the log shows
         return _Step(size, ratio, np.array([size]), jac, held)
 
     def _polished(self, quantity, target, q0, sign, found):
@@ -276,7 +278,7 @@ class _Scripted(Profiler):
         return _Step(found.size, self.polish[found.size], found.x, found.jac, found.held)
 
     def _unheld(self, x):
-        return bool(self.polish)  # (a modulus moved off its bound: polish a re-fit over)
+        return self.moved
 
     def _walled(self, quantity, q0, sign, end):
         return False
@@ -288,14 +290,15 @@ def test_an_end_whose_confirmation_lies_lower_is_no_end():
     re-fit at +0.1151 drove Scoat onto its bound, ρ 111.5, a bracket narrow enough to be
     the end; the step beyond, +0.2302, lay lower, ρ 16.45 — and the truth, at +0.505,
     fits at ρ 0.21. The misfit falls beyond that end: the side is not checked, no end is
-    stated. A confirmation that rises on still ends it."""
-    tcoat = Quantity("t", lambda theta: float(theta[0]), False, -1.0, 1.5)
+    stated. A confirmation that rises on, or falls less than half, still ends it."""
+    tcoat = Quantity("t", lambda theta: float(theta[0]), False, -0.7643, 1.538)
     falls = _Scripted((0.1132, 0.676), [(0.1151, 111.5, True), (0.2302, 16.45, False)])
     side = falls._side(tcoat, 1.0, None)
     assert side.end is None and side.method == "unchecked", side
-    rises = _Scripted((0.1132, 0.676), [(0.1151, 111.5, True), (0.2302, 500.0, False)])
-    side = rises._side(tcoat, 1.0, None)
-    assert side.method == "profile" and side.end == pytest.approx(0.1151), side
+    for beyond in (500.0, 60.0):  # risen on, or fallen less than half: the end stands
+        rises = _Scripted((0.1132, 0.676), [(0.1151, 111.5, True), (0.2302, beyond, False)])
+        side = rises._side(tcoat, 1.0, None)
+        assert side.method == "profile" and side.end == pytest.approx(0.1151), side
 
 
 def test_a_leap_a_polish_brought_down_but_not_under_the_threshold_ends_no_side():
@@ -304,11 +307,24 @@ def test_a_leap_a_polish_brought_down_but_not_under_the_threshold_ends_no_side()
     and −0.137, then 714 at −0.148 — a leap beyond a flat stretch, which a fresh Jacobian
     brought to 2.3, no nearer the threshold than an unsettled re-fit; "k_s ≥" there missed
     the truth, which lies beyond. The side is not checked: no end is stated."""
-    k_s = Quantity("t", lambda theta: float(theta[0]), False, -0.1579, 0.0421)
+    k_s = Quantity("t", lambda theta: float(theta[0]), False, -0.1579, 0.04214)
     script = [(0.1579, 3.9e4, False), *[(s, 0.7099, False) for s in (0.1124, 0.1351, 0.1374)]]
     script += [(0.1476, 714.0, False), (0.1579, 3.9e4, False)]
-    profiler = _Scripted((0.0, 0.0), script, polished={0.1579: 55.75, 0.1476: 2.316})
+    profiler = _Scripted((0.1074, 0.7099), script, {0.1579: 55.75, 0.1476: 2.316}, unheld=True)
     side = profiler._side(k_s, -1.0, None)
+    assert side.end is None and side.method == "unchecked", side
+
+
+def test_steps_that_run_out_below_a_leap_end_no_side():
+    """cover-104 of 240: k_s's lower side, ρ 6·10⁵ at the range's end, 285 at −0.0057, and
+    0.20–0.23 at every other step out to −0.0049 (one at −0.0048 polished from 2.8) — the
+    eight steps ran out between that flat stretch and the leap, and "k_s ≥" was stated at
+    −0.0057 where the truth, −0.0061, fits at ρ 0.28. The side is not checked: no end."""
+    k_s = Quantity("t", lambda theta: float(theta[0]), False, -0.01425, 0.1857)
+    script = [(0.01, 6.049e5, False), (0.001331, 0.1987, False), (0.005665, 285.0, False)]
+    script += [(0.001764, 0.1987, False), (0.003715, 0.1987, False), (0.00391, 0.2279, False)]
+    script += [(0.004788, 2.807, False), (0.004875, 0.2124, False)]
+    side = _Scripted((0.000367, 0.1987), script, {0.004788: 0.2199})._side(k_s, -1.0, None)
     assert side.end is None and side.method == "unchecked", side
 
 

@@ -394,9 +394,9 @@ class Profiler:
             if pending is not None:  # ``found`` is the step beyond an end: does it rise on?
                 end, how = pending
                 pending = None
-                if AGREES[1] < found.ratio < end.ratio:
-                    # over the threshold, and lower than the end it was to confirm: the
-                    # misfit falls beyond that end, whose re-fit had not settled (cover-046
+                if found.size > end.size and AGREES[1] < found.ratio < end.ratio / CONFIRM_RATIO:
+                    # over the threshold, and beyond the end it was to confirm at less than
+                    # half its ρ: the misfit falls beyond it, its re-fit had not settled (cover-046
                     # of 240, with the upper bounds' differences held to rounding, tried:
                     # Tcoat's re-fit at +0.115 in log Tcoat drove Scoat onto its
                     # bound at ρ 111, the step at +0.230 lay at ρ 16.5, the truth, at
@@ -440,6 +440,11 @@ class Profiler:
             size, interpolated = self._next_size(under, over, far, interpolated)
         if over is None:  # not closed by the curves within the steps
             return ProfileSide(None, "profile", under.ratio, MAX_STEPS, under.point(self))
+        if parameter and _leap(over, under, unders):
+            # the steps ran out with the one over a leap from the flat stretch they walked
+            # (cover-104 of 240: k_s ρ 0.20–0.23 at every step to −0.0049, 285 at −0.0057
+            # where the truth, −0.0061, fits at 0.28): no end, as for a leap found last
+            return self._unfinished(quantity, q0, sign, None, under, None, MAX_STEPS + 1)
         return self._bracketed(quantity, q0, sign, under, over, MAX_STEPS, unders, held_over)
 
     def _cornered(self, quantity: Quantity, sign: float, under: _Step, held_over: bool) -> bool:

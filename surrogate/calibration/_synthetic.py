@@ -298,20 +298,21 @@ def true_parameters(case: Mapping[str, Any]) -> dict[str, float]:
     return values
 
 
-def truth_ratio(case: Mapping[str, Any], path: Path, fitted_rmse_n: float) -> float:
-    """The truth's misfit above the fit's (RMSE ``fitted_rmse_n``) in units of a profile's
-    95 % threshold, ``ρ`` of the truth (:func:`.determination_threshold`, every parameter
-    counted). At most 1, every profile interval must hold the truth (the profile at the
-    truth's value lies no higher than the truth's own misfit): a miss there is the
-    method's. Over 1 this says nothing of a single interval: the truth's misfit follows
-    χ² with as many degrees as the data determine parameters, over the one-parameter
-    threshold in 28 % of data sets for three, 42 % for four. One run per condition group
-    of the study at ``path`` (``surrogate.compare``)."""
+def truth_ratio(case: Mapping[str, Any], path: Path, fitted: Any) -> float:
+    """The truth's misfit above the fit's in units of the profiles' 95 % threshold
+    (:func:`.determination_threshold` with the calibration's own degrees of freedom, as a
+    verified end's ``ratio`` is judged): ``ρ`` of the truth. ``fitted``: the calibration's
+    result (its ``rmse_n`` and ``determination``). At most 1 — less the tolerance an end
+    is accepted within, ``ρ`` 0.8–1.25 — every profile interval must hold the truth: the
+    profile at the truth's value lies no higher than the truth's own misfit. Over 1 it
+    says nothing of one interval: the truth's misfit above the fit's follows χ² with as
+    many degrees as the data determine parameters, over the one-parameter threshold in
+    28 % of data sets for three, 43 % for four. One run per condition group of the study
+    at ``path`` (``surrogate.compare``)."""
     truth = compare(path, params=true_parameters(case), plots=False, progress=False)
-    points = 91 * len(case["tests"])  # (synthetic_measurements' angles)
-    dof = points - len(true_parameters(case))
-    rss = points * fitted_rmse_n**2
-    return points * (truth.rmse_n**2 - fitted_rmse_n**2) / determination_threshold(rss, dof)
+    dof = int(fitted.determination["dof"])
+    rss = dof * fitted.rmse_n**2  # (the point count cancels: RSS per point, times dof)
+    return dof * (truth.rmse_n**2 - fitted.rmse_n**2) / determination_threshold(rss, dof)
 
 
 def write_calibration_study(folder: Path, case: Mapping[str, Any], *, seed: int = 0) -> Path:
