@@ -117,7 +117,7 @@ def calibrate_case(case: dict[str, Any]) -> dict[str, Any]:
         start = time.perf_counter()
         result = surrogate.calibrate(path, progress=False, record=False)
         seconds = time.perf_counter() - start
-        inside = None if result.determination is None else truth_ratio(case, path, result)
+        ratio = None if result.determination is None else truth_ratio(case, path, result)
     row = {
         "set": case["name"],
         "coating": case["coating"],
@@ -128,7 +128,7 @@ def calibrate_case(case: dict[str, Any]) -> dict[str, Any]:
         "rmse_over_noise": result.rmse_n / result.noise_n,
         "solver_calls": result.solver_calls,
         "seconds": seconds,
-        "truth_ratio": inside,
+        "truth_ratio": ratio,
         "quantities": {},
     }
     determination = result.determination
@@ -197,11 +197,11 @@ def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
         for r in converged
         if r.get("profile_solver_calls") is not None
     ]
-    outside = [r for r in converged if r["truth_ratio"] > 1.0]
+    over = [r for r in converged if r["truth_ratio"] > 1.0]
     return {
         "data_sets": len(rows),
         "converged": len(converged),
-        "truth_over_the_threshold": len(outside) / len(converged) if converged else None,
+        "truth_over_the_threshold": len(over) / len(converged) if converged else None,
         "per_quantity": per,
         "profile_runs_over_calibration_runs": {
             "median": statistics.median(ratios) if ratios else None,

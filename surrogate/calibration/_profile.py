@@ -368,12 +368,18 @@ class Profiler:
                 found = polished
                 self._log(quantity, sign, step, size, far, found)
             held_over = held_over and (found.ratio <= AGREES[1] or found.held)  # (polished)
-            # a leap a polish brought down but not under the threshold has not settled
-            # either (cover-089 of 240, with the upper bounds' differences held to rounding,
-            # tried: k_s ρ 714 at −0.148, polished to 2.3; 0.71 at every step to −0.137, and
-            # without them 0.45 at the range's end, a re-fit from the optimum)
-            leapt = found.ratio > AGREES[1] and _leap(raw, under, unders)
-            if parameter and pending is None and (_leap(found, under, unders) or leapt):
+            # a leap — or one a polish brought down but not under the threshold, which has
+            # not settled either (cover-089 of 240, with the upper bounds' differences held
+            # to rounding, tried: k_s ρ 714 at −0.148, polished to 2.3; 0.71 at every step
+            # to −0.137, and without them 0.45 at the range's end, a re-fit from the optimum)
+            if (
+                parameter
+                and pending is None
+                and (
+                    _leap(found, under, unders)
+                    or (found.ratio > AGREES[1] and _leap(raw, under, unders))
+                )
+            ):
                 if over is not None and _far_unheld(over) and over.size > found.size:
                     # a step over farther out, as far over (ρ > FAR_OVER) and no range
                     # holding it, is a re-fit that could not follow the trade either: no end,
