@@ -465,3 +465,22 @@ def test_a_side_whose_refits_leap_is_not_ended_by_a_step_as_far_over(tmp_path, s
     low = -math.inf if entry["low"] is None else entry["low"]
     high = math.inf if entry["high"] is None else entry["high"]
     assert low <= value <= high, (value, entry, result.message)
+
+
+def test_a_leap_beyond_a_flat_stretch_of_mps_upper_side_ends_no_side():
+    """A coat with no plateau at 10 mm (0.6/0.35/0.02, noise seed 502) fitted with Tcoat at its
+    lower bound: Mp's upper side, ρ 1.5·10⁷ and 1.3·10⁵ where a range held the re-fit, 5,684
+    at +0.52 in log Mp where none did, and −3.5·10⁻⁶ at every step from +0.058 to +0.43 —
+    the steps ran out between that flat stretch and the leap, and "Mp ≤ 7.55" was stated
+    where the truth, 8.26, fits as well. A higher Mp only delays a yield: the leap is a
+    re-fit that could not follow the trade, as on a parameter's side; no end is stated. Its
+    lower side, which the curves see at every coat, still ends at a leap."""
+    mp = Quantity("plastic_moment_n", lambda theta: float(theta[0]), False, -2.016, 2.287)
+    flat = -3.548e-6
+    script = [(2.079, 1.526e7, True), (1.043, 1.289e5, True), (0.5242, 5684.0, False)]
+    script += [(s, flat, False) for s in (0.0576, 0.2909, 0.3142, 0.4192, 0.4297)]
+    side = _Scripted((0.0058, flat), script)._side(mp, 1.0, 2.079)
+    assert side.end is None and side.method == "unchecked", side
+    mirrored = Quantity("plastic_moment_n", lambda theta: float(theta[0]), False, -2.287, 2.016)
+    lower = _Scripted((0.0058, flat), script)._side(mirrored, -1.0, 2.079)
+    assert lower.end is not None and lower.method == "profile", lower

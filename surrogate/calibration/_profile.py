@@ -328,7 +328,9 @@ class Profiler:
         polishes = 0
         unders: list[_Step] = []  # this side's re-fits under the threshold
         held_over = True  # every re-fit over the threshold so far had a range holding it
-        parameter = quantity.name in self.model.problem.space.names  # (not D's or Mp's)
+        # a leap far over the threshold is the physics only where the curves see the side at
+        # every coat (ALWAYS_SEEN); elsewhere a re-fit that could not follow a trade
+        leaps = (quantity.name, sign) not in ALWAYS_SEEN
         for step in range(1, MAX_STEPS + 1):
             try:  # from the farthest point under the threshold: a good fit, a good Jacobian
                 evaluations = (
@@ -373,7 +375,7 @@ class Profiler:
             # to rounding, tried: k_s ρ 714 at −0.148, polished to 2.3; 0.71 at every step
             # to −0.137, and without them 0.45 at the range's end, a re-fit from the optimum)
             if (
-                parameter
+                leaps
                 and pending is None
                 and (
                     _leap(found, under, unders)
@@ -446,7 +448,7 @@ class Profiler:
             size, interpolated = self._next_size(under, over, far, interpolated)
         if over is None:  # not closed by the curves within the steps
             return ProfileSide(None, "profile", under.ratio, MAX_STEPS, under.point(self))
-        if parameter and _leap(over, under, unders):
+        if leaps and _leap(over, under, unders):
             # the steps ran out with the one over a leap from the flat stretch they walked
             # (cover-104 of 240: k_s ρ 0.20–0.23 at every step to −0.0049, 285 at −0.0057
             # where the truth, −0.0061, fits at 0.28): no end, as for a leap found last
@@ -934,9 +936,13 @@ def _leap(found: _Step, under: _Step, earlier: Sequence[_Step]) -> bool:
     """Whether ``found`` leaps far over the threshold (ρ > ``FAR_OVER``) where no range holds
     it, beyond a flat stretch of the side's own re-fits: a re-fit that cannot follow a trade
     of parameters (cover-005's k_s: ρ 523 at −0.049, ρ 0.18 at every step up to −0.043; the
-    truth, −0.055, fits at 0.59; a fresh Jacobian brought it no lower) — a parameter's side
-    is not checked beyond it. Not D's or Mp's: there a leap is the physics (a plastic moment
-    low enough to yield within the test, where none did)."""
+    truth, −0.055, fits at 0.59; a fresh Jacobian brought it no lower) — the side is not
+    checked beyond it. Judged on a parameter's sides and Mp's upper one, not where the curves
+    see the side at every coat (``ALWAYS_SEEN``: D's, and Mp's lower, where a leap is the
+    physics: a plastic moment low enough to yield within the test, where none did). A higher
+    Mp only delays a yield: seen, a coat with no plateau at 10 mm (0.6/0.35/0.02, noise seed
+    502) fitted with Tcoat at its lower bound, Mp's re-fits at ρ 0.00 out to +0.43 in log Mp
+    and 5,684 at +0.52, "Mp 4.29–7.55" stated where the truth, 8.26, fits as well."""
     return (
         _far_unheld(found)
         and any(e is under for e in earlier)  # the side's own: not a point found elsewhere
