@@ -16,9 +16,7 @@ Y       (n, A − 1) ``asinh(F/s)`` with ``s = FORCE_SCALE_N``: logarithmic for 
 ``Y`` is reduced to principal components (:class:`PrincipalBasis`: 99.9999 % of the
 variance, at most 16); the scores get a linear trend in ``Z`` (universal kriging,
 ridge-stabilised) and one GP each on what the trend leaves (Matérn ν = 2.5, ARD).
-Hyperparameters are warm-started from the previous fit, and searched again only once the
-runs have grown by ``SEARCH_GROWTH`` since the last search (or were thinned): between, a
-refit keeps the kernels and conditions on the new runs.
+Hyperparameters are warm-started from the previous fit.
 """
 
 from __future__ import annotations
@@ -40,12 +38,6 @@ __all__ = ["FORCE_SCALE_N", "CurveSurrogate"]
 CURVE_VARIANCE = 1.0 - 1e-6  # share of the transformed curves' variance the basis keeps
 MAX_COMPONENTS = 16
 TREND_RIDGE = 1e-6  # on the trend's slopes (not its intercept)
-# the hyperparameters are searched again once the runs grew by this factor since their last
-# search: a calibration adds a point's few runs at a time to a hundred and more, which moved
-# them little, and the searches were a fifth of the test suite's time (a search of 16 scores'
-# kernels on 126 runs: about 1,200 likelihood evaluations, 0.9 s; conditioning: 16 Cholesky
-# factors)
-SEARCH_GROWTH = 1.1
 
 
 class CurveSurrogate:
@@ -74,7 +66,6 @@ class CurveSurrogate:
         self.seed = seed
         self._kernels: list[Kernel] = []
         self._scale: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        self._searched_rows = 0  # runs at the kernels' last search
 
     def _inputs(self, X: np.ndarray, groups: np.ndarray) -> np.ndarray:
         raw = self.features(np.atleast_2d(X), groups)
@@ -93,15 +84,8 @@ class CurveSurrogate:
         scores = self.pca_.project(Y)
         self.trend_ = self._trend(Z, scores)
         scores = scores - _design(Z) @ self.trend_
-        rows = len(Z)
-        # grown enough, or thinned (fewer runs than at the last search)
-        search = rows >= SEARCH_GROWTH * self._searched_rows or rows < self._searched_rows
-        self.gps_ = [
-            self._score_gp(j, Z, scores[:, j], search) for j in range(self.pca_.n_components)
-        ]
+        self.gps_ = [self._score_gp(j, Z, scores[:, j]) for j in range(self.pca_.n_components)]
         self._kernels = [gp.kernel_ for gp in self.gps_]
-        if search:
-            self._searched_rows = rows
         return self
 
     @staticmethod
@@ -112,14 +96,12 @@ class CurveSurrogate:
         ridge[0, 0] = 0.0
         return np.linalg.solve(design.T @ design + ridge, design.T @ scores)
 
-    def _score_gp(self, j: int, Z: np.ndarray, score: np.ndarray, search: bool) -> Regressor:
-        """The GP of score ``j``: its hyperparameters searched from the previous fit's kernel
-        if any (where ``search``), else that kernel conditioned on the runs."""
+    def _score_gp(self, j: int, Z: np.ndarray, score: np.ndarray) -> Regressor:
+        """The GP of score ``j``, warm-started from the previous fit's kernel if any."""
         warm = j < len(self._kernels)
         gp = Regressor(
             kernel=self._kernels[j] if warm else _kernel(Z.shape[1]),
             normalize_y=True,
-            optimizer="fmin_l_bfgs_b" if search or not warm else None,
             n_restarts_optimizer=0 if warm else 1,
             random_state=self.seed,
         )
