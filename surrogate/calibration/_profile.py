@@ -330,7 +330,7 @@ class Profiler:
         held_over = True  # every re-fit over the threshold so far had a range holding it
         # a leap far over the threshold is the physics only where the curves see the side at
         # every coat (ALWAYS_SEEN); elsewhere a re-fit that could not follow a trade
-        leaps = (quantity.name, sign) not in ALWAYS_SEEN
+        leaps = not _always_seen(quantity, sign)
         for step in range(1, MAX_STEPS + 1):
             try:  # from the farthest point under the threshold: a good fit, a good Jacobian
                 evaluations = (
@@ -465,7 +465,7 @@ class Profiler:
         side the curves see at every coat (``ALWAYS_SEEN``)."""
         span = abs(float(np.diff(quantity.range_scaled)[0]))
         return (
-            (quantity.name, sign) not in ALWAYS_SEEN
+            not _always_seen(quantity, sign)
             and under.size <= 1e-9 * span  # (the optimum, or a known point at it)
             and held_over
             and bool(np.any(self.optimum.pinned))
@@ -491,7 +491,7 @@ class Profiler:
         4.0–11.37 where a larger Scoat fits as well at any Mp above (lifted: ρ −1.4·10⁻⁴
         at +0.056 %, −1.3·10⁻⁵ at the optimum).
         Never on a side the curves see at every coat (``ALWAYS_SEEN``)."""
-        if (quantity.name, sign) in ALWAYS_SEEN:
+        if _always_seen(quantity, sign):
             return False
         far = abs(quantity.range_scaled[1 if sign > 0 else 0] - q0)
         x = end.x
@@ -917,11 +917,16 @@ def _ranged(
     return _range_holds(quantity, sign, under, over) and _flat(under, earlier)
 
 
+def _always_seen(quantity: Quantity, sign: float) -> bool:
+    """Whether the curves see this side of ``quantity`` at every coat (``ALWAYS_SEEN``)."""
+    return (quantity.name, sign) in ALWAYS_SEEN
+
+
 def _range_holds(quantity: Quantity, sign: float, under: _Step, over: _Step) -> bool:
     """Whether a range holds the step ``over`` beyond a stretch of re-fits under the
     threshold, on a side the curves do not see at every coat: what :func:`_ranged` asks
     before the misfit's flatness."""
-    if (quantity.name, sign) in ALWAYS_SEEN or not over.held:
+    if _always_seen(quantity, sign) or not over.held:
         return False
     return _stretch(under, over)
 
