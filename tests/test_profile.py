@@ -257,7 +257,7 @@ class _Scripted(Profiler):
         )
         self.optimum = SimpleNamespace(x=np.zeros(1), jacobian=np.zeros((2, 1)))
         self.seen, self.under, self.script = [], under, iter(script)
-        self.polish = polished or {}  # |η| → ρ after a fresh Jacobian
+        self.polish = polished or {}  # |η| → ρ after a fresh Jacobian (a list: each polish's)
         self.moved = unheld  # a modulus moved off its bound: a re-fit over is polished
 
     def _farthest_under(self, quantity, q0, sign):
@@ -273,9 +273,12 @@ class _Scripted(Profiler):
         return _Step(size, ratio, np.array([size]), jac, held)
 
     def _polished(self, quantity, target, q0, sign, found):
-        if found.size not in self.polish:
+        ratios = self.polish.get(found.size)
+        if isinstance(ratios, list):  # successive polishes (:meth:`Profiler._settled`)
+            ratios = ratios.pop(0) if ratios else None
+        if ratios is None or ratios >= found.ratio:
             return found  # (a polish that lowered nothing)
-        return _Step(found.size, self.polish[found.size], found.x, found.jac, found.held)
+        return _Step(found.size, ratios, found.x, found.jac, found.held)
 
     def _unheld(self, x):
         return self.moved
@@ -465,6 +468,45 @@ def test_a_side_whose_refits_leap_is_not_ended_by_a_step_as_far_over(tmp_path, s
     low = -math.inf if entry["low"] is None else entry["low"]
     high = math.inf if entry["high"] is None else entry["high"]
     assert low <= value <= high, (value, entry, result.message)
+
+
+def test_a_leap_beyond_an_end_is_refitted_until_it_settles():
+    """cover-164 of 240 (one test, the tension effect, a coat with no plateau): k_s's lower
+    side from a point another profile found at −0.0822 (ρ 0.59); the first step, at the
+    range's end, leapt to ρ 1.5·10⁶, the next at −0.0839 lay at 1.10 — an end to confirm —
+    and the confirmation, at the range's end again, leapt to 1.5·10⁶ as well: "k_s ≥ 0.0154"
+    was stated where the truth, 0.0028, fits at ρ ≤ 0.15 with every other parameter its own.
+    Fresh Jacobians bring that confirmation to 609, 15 and 1.33 (the real log): the misfit
+    rises less than a quadratic beyond the end, and the side is open to the range's end.
+    Still falling by half at every polish, the leap confirms nothing (unchecked); settled
+    high (318, 316: cover-120's Tcoat), it is a rise and confirms the end; on a side the
+    curves see at every coat a leap is the physics, and confirms it unpolished."""
+    k_s = Quantity("t", lambda theta: float(theta[0]), False, -0.09926, 0.1007)
+    under, end = (0.08216, 0.5925), -0.08387
+    leap = [(0.09926, 1.545e6, False), (0.08387, 1.096, False), (0.09926, 1.545e6, False)]
+
+    def side(quantity, polishes):
+        return _Scripted(under, leap, {0.09926: polishes})._side(quantity, -1.0, -0.09926)
+
+    settles = side(k_s, [609.0, 15.0, 1.33])
+    assert settles.end is None and settles.method == "profile", settles
+    falling = side(k_s, [1e5, 1e4, 1e3, 100.0, 10.0])
+    assert falling.end is None and falling.method == "unchecked", falling
+    rises = side(k_s, [318.0, 316.0])
+    assert rises.method == "profile" and rises.end == pytest.approx(end), rises
+    d = Quantity("bending_stiffness_nmm", lambda theta: float(theta[0]), False, -0.09926, 0.1)
+    seen = side(d, [1.0])
+    assert seen.method == "profile" and seen.end == pytest.approx(end), seen
+
+
+def test_a_leap_refitted_through_the_threshold_is_followed_under_it():
+    """cover-185 of 240: Tcoat's confirmation leapt to ρ 8.6·10⁴, and fresh Jacobians took
+    it to 856, 1.05, 0.06 and 0 — at 1.05 a re-fit still falling, not an end. Settled under
+    the threshold, the side goes on beyond it (here to the range's end: open)."""
+    q = Quantity("t", lambda theta: float(theta[0]), False, -0.2, 0.2)
+    script = [(0.03, 1.0, False), (0.06, 8.6e4, False), (0.2, 0.1, False)]
+    side = _Scripted((0.02, 0.3), script, {0.06: [856.0, 1.05, 0.0587]})._side(q, -1.0, -0.03)
+    assert side.end is None and side.method == "profile", side
 
 
 def test_a_leap_beyond_a_flat_stretch_of_mps_upper_side_ends_no_side():

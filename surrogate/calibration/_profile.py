@@ -123,6 +123,10 @@ POLISH_SHARE = 0.05  # quantity's range (a narrow statement: where an unsettled 
 # — not the linear end's own check, which its confirmation tests; and, anywhere, a re-fit
 # over the threshold that took a modulus off the bound holding it at the optimum
 # (:meth:`Profiler._unheld`)
+LEAP_POLISHES = 4  # a confirmation that leaps (ρ > FAR_OVER, no range holding it) is re-fitted
+# from a fresh Jacobian while each time at least halves its ρ (DESCENDING), at most this many
+# times: settled, it is judged; still falling, it confirms nothing (cover-164 of 240: 3 times
+# from 1.5·10⁶ to 1.33; cover-185: 8.6·10⁴, 856, 1.05; cover-120: 318, 316, a rise)
 BETTER_CHI2 = 1.0  # a profile point this many s² below the optimum: another basin
 TRUST = 0.2  # a re-fit's Gauss–Newton step moves no coordinate farther than this
 DAMPING = 1e-8  # of ‖J‖²: the re-fit's Gauss–Newton steps, damped
@@ -402,6 +406,15 @@ class Profiler:
             if pending is not None:  # ``found`` is the step beyond an end: does it rise on?
                 end, how = pending
                 pending = None
+                if leaps and found.size > end.size and _far_unheld(found):
+                    # a leap beyond the end: a rise, or a re-fit that could not follow the
+                    # trade? Re-fitted from fresh Jacobians until it settles (cover-164 of 240:
+                    # k_s ρ 0.59 at −0.082, 1.10 at −0.084, 1.5·10⁶ at −0.099, the range's
+                    # end, polished to 609, 15, 1.33; the truth, −0.096, fits at ρ ≤ 0.15)
+                    found, settled = self._settled(quantity, q0 + sign * size, q0, sign, found)
+                    self._log(quantity, sign, step, size, far, found)
+                    if not settled:  # still falling: the side is not checked beyond the end
+                        return self._unfinished(quantity, q0, sign, None, under, None, step + 1)
                 if found.size > end.size and AGREES[1] < found.ratio < end.ratio / CONFIRM_RATIO:
                     # over the threshold, and beyond the end it was to confirm at less than
                     # half its ρ: the misfit falls beyond it, its re-fit had not settled (cover-046
@@ -788,6 +801,22 @@ class Profiler:
             return self._step(quantity, q0, sign, best, jac)
         except BudgetSpent:
             return found
+
+    def _settled(
+        self, quantity: Quantity, target: float, q0: float, sign: float, found: _Step
+    ) -> tuple[_Step, bool]:
+        """``found`` :meth:`_polished` while each polish at least halves its ``ρ``
+        (``DESCENDING``), at most ``LEAP_POLISHES`` times, and whether it settled: a polish
+        lowered it by less, or nothing, or brought it under the threshold — not to it, which
+        a re-fit still falling passes on its way (cover-185 of 240: Tcoat's confirmation
+        8.6·10⁴, 856, 1.05, then 0.06 and 0)."""
+        for _ in range(LEAP_POLISHES):
+            polished = self._polished(quantity, target, q0, sign, found)
+            halved = polished.ratio < DESCENDING * found.ratio
+            found = polished
+            if not halved or found.ratio < AGREES[0]:
+                return found, True
+        return found, False
 
     def _descend(
         self,
