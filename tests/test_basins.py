@@ -224,6 +224,7 @@ def test_the_diagnosis_finds_the_basin_a_calibration_missed(tmp_path, monkeypatc
     assert step["rmse_n"] <= NEAR_NOISE * result.noise_n
 
 
+@pytest.mark.slow
 def test_compare_says_when_another_basin_beats_the_calibration(tmp_path, monkeypatch):
     path = write_calibration_study(tmp_path, CASE, seed=1)
     good = surrogate.calibrate(path, progress=False)  # the truth's basin, recorded

@@ -351,6 +351,7 @@ def test_calibration_reaches_the_expensive_solvers_noise_floor_in_few_expensive_
     assert any(reported == pytest.approx(100 * (r - 1), abs=1e-6) for r in ratios)
 
 
+@pytest.mark.slow
 def test_a_corrected_models_optimum_is_converged_on_the_expensive_solvers_own_test(
     distorted_solver, log_runs
 ):
@@ -1072,6 +1073,7 @@ def test_the_probes_run_after_a_corrected_optimum_the_expensive_solver_ran(
     assert np.array_equal(taught[1][0], probes[0][0][0])  # the first probe, the next run
 
 
+@pytest.mark.slow
 def test_the_held_out_error_of_a_verified_fit_without_its_jacobian_is_the_corrected_models(
     distorted_solver, log_runs
 ):
@@ -1177,6 +1179,7 @@ def test_a_correction_learned_on_another_model_is_corrected_locally_where_it_mis
     assert same.uncarried is None and same.dropped is None  # where its correction learned
 
 
+@pytest.mark.slow
 def test_a_budget_below_todays_design_is_the_corrected_loops_to_spend(distorted_solver, log_runs):
     """With the built-in solver as the prior, a calibration needs one expensive
     verification (a run at each condition group), not an initial design on the expensive
@@ -1216,6 +1219,7 @@ def test_a_budget_below_todays_design_is_the_corrected_loops_to_spend(distorted_
     assert _expensive_runs(log_runs) == runs
 
 
+@pytest.mark.slow
 def test_a_diagnosis_recalibration_on_the_expensive_solver_does_not_certify(
     distorted_solver, log_runs, monkeypatch
 ):
