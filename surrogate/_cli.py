@@ -1082,13 +1082,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except InputDataError as error:
         _fail(f"error: {error}", EXIT_USAGE)
     except Interrupted as error:  # 143 or 130, as a shell reports a process the signal killed
-        _fail(str(error), 128 + int(getattr(signal, error.signal_name)))
+        _stopped(str(error), 128 + int(getattr(signal, error.signal_name)), argv)
     except KeyboardInterrupt:
-        _fail("interrupted (Ctrl-C)", 128 + int(signal.SIGINT))
+        _stopped("interrupted (Ctrl-C)", 128 + int(signal.SIGINT), argv)
     except SystemError as error:
         if not _interrupted_in_native_code(error):
             raise
-        _fail("interrupted (Ctrl-C)", 128 + int(signal.SIGINT))
+        _stopped("interrupted (Ctrl-C)", 128 + int(signal.SIGINT), argv)
     except SolverError as error:
         _fail(f"solver error: {error}", EXIT_SOLVER)
     except IsADirectoryError as error:
@@ -1121,6 +1121,19 @@ def _data_warnings_in_one_line() -> Iterator[None]:
     with warnings.catch_warnings():
         warnings.showwarning = show
         yield
+
+
+def _stopped(message: str, code: int, argv: Sequence[str] | None) -> NoReturn:
+    """:func:`_fail` for a command a signal stopped. Where the command is the process's own
+    (``argv`` None: the ``surrogate`` command, ``python -m surrogate``), SIGINT is ignored from
+    here on: the process has said that it stopped and how, and a second Ctrl-C — the
+    user's, or one :func:`_ctrl_c_again` sends again — must not end it on its way out with
+    another status (seen once in a suite under load: the line printed, then the process
+    killed by SIGINT, −2 where 130 was due; not reproduced). A caller's own ``main(argv)``
+    keeps its handler."""
+    if argv is None:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _fail(message, code)
 
 
 def _fail(message: str, code: int) -> NoReturn:

@@ -2,6 +2,7 @@
 
 import hashlib
 import json
+import signal
 import subprocess
 import sys
 
@@ -197,3 +198,38 @@ def test_design_file_of_ones_own_runs(tmp_path):
     table = pd.read_csv(tmp_path / "samples.csv")
     assert list(table.case_id) == ["mine-1", "mine-2"]
     assert table.f60_n.iloc[0] == pytest.approx(9.958, abs=1e-3)
+
+
+_STOPPED_AND_SIGNALLED_AGAIN = """
+import atexit, os, signal, sys, time
+from surrogate import _cli
+
+def handler(args):
+    raise KeyboardInterrupt  # the command's Ctrl-C
+
+@atexit.register
+def again():  # what SIGINT does to the process on its way out
+    print(signal.getsignal(signal.SIGINT) is signal.SIG_IGN, flush=True)
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(0.2)
+
+_cli._COMMANDS = [(lambda commands: commands.add_parser("stop"), handler)]
+sys.argv = ["surrogate", "stop"]
+sys.exit(_cli.main())
+"""
+
+
+def test_a_stopped_command_ignores_a_second_ctrl_c_on_its_way_out():
+    """The ``surrogate`` command stopped by Ctrl-C says so in one line and exits 130; from
+    then on SIGINT is ignored, so another one as it exits (the user's, or a swallowed one
+    sent again) cannot end it with another status."""
+    done = subprocess.run(
+        [sys.executable, "-c", _STOPPED_AND_SIGNALLED_AGAIN],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    assert done.returncode == 130, done.stderr
+    assert done.stderr.strip() == "surrogate: interrupted (Ctrl-C)", done.stderr
+    assert done.stdout.strip() == "True"
