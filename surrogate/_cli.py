@@ -1131,8 +1131,12 @@ def _stopped(message: str, code: int, argv: Sequence[str] | None) -> NoReturn:
     another status (seen once in a suite under load: the line printed, then the process
     killed by SIGINT, −2 where 130 was due; not reproduced). A caller's own ``main(argv)``
     keeps its handler."""
-    if argv is None:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    while argv is None:
+        try:  # (a Ctrl-C already pending is handled first: it raises here, and is dropped)
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+            break
+        except KeyboardInterrupt:
+            continue
     _fail(message, code)
 
 

@@ -23,6 +23,7 @@ import pytest
 
 import surrogate
 from surrogate.calibration._calibrate import run_calibration
+from surrogate.calibration._local import BudgetSpent
 from surrogate.calibration._problem import coat_section
 from surrogate.calibration._profile import (
     Profile,
@@ -272,10 +273,14 @@ class _Scripted(Profiler):
         assert abs(x[0]) == pytest.approx(size, rel=2e-3)  # the step the log shows
         return _Step(size, ratio, np.array([size]), jac, held)
 
-    def _polished(self, quantity, target, q0, sign, found):
+    def _polished(self, quantity, target, q0, sign, found, refused=False):
         ratios = self.polish.get(found.size)
         if isinstance(ratios, list):  # successive polishes (:meth:`Profiler._settled`)
             ratios = ratios.pop(0) if ratios else None
+        if ratios == "spent":  # the budget refuses it
+            if refused:
+                raise BudgetSpent
+            return found
         if ratios is None or ratios >= found.ratio:
             return found  # (a polish that lowered nothing)
         return _Step(found.size, ratios, found.x, found.jac, found.held)
@@ -486,16 +491,20 @@ def test_a_leap_beyond_an_end_is_refitted_until_it_settles():
     leap = [(0.09926, 1.545e6, False), (0.08387, 1.096, False), (0.09926, 1.545e6, False)]
 
     def side(quantity, polishes):
-        return _Scripted(under, leap, {0.09926: polishes})._side(quantity, -1.0, -0.09926)
+        found = _Scripted(under, leap, {0.09926: polishes})._side(quantity, -1.0, -0.09926)
+        assert not polishes  # each polish the confirmation's (none left: none of another step)
+        return found
 
     settles = side(k_s, [609.0, 15.0, 1.33])
     assert settles.end is None and settles.method == "profile", settles
-    falling = side(k_s, [1e5, 1e4, 1e3, 100.0, 10.0])
+    falling = side(k_s, [1e5, 1e4, 1e3, 100.0])
     assert falling.end is None and falling.method == "unchecked", falling
+    spent = side(k_s, [609.0, "spent"])  # the budget stopped it still falling
+    assert spent.end is None and spent.method == "unchecked", spent
     rises = side(k_s, [318.0, 316.0])
     assert rises.method == "profile" and rises.end == pytest.approx(end), rises
     d = Quantity("bending_stiffness_nmm", lambda theta: float(theta[0]), False, -0.09926, 0.1)
-    seen = side(d, [1.0])
+    seen = side(d, [])  # no polish: the physics
     assert seen.method == "profile" and seen.end == pytest.approx(end), seen
 
 
@@ -505,8 +514,9 @@ def test_a_leap_refitted_through_the_threshold_is_followed_under_it():
     the threshold, the side goes on beyond it (here to the range's end: open)."""
     q = Quantity("t", lambda theta: float(theta[0]), False, -0.2, 0.2)
     script = [(0.03, 1.0, False), (0.06, 8.6e4, False), (0.2, 0.1, False)]
-    side = _Scripted((0.02, 0.3), script, {0.06: [856.0, 1.05, 0.0587]})._side(q, -1.0, -0.03)
-    assert side.end is None and side.method == "profile", side
+    polishes = [856.0, 1.05, 0.0587]
+    side = _Scripted((0.02, 0.3), script, {0.06: polishes})._side(q, -1.0, -0.03)
+    assert side.end is None and side.method == "profile" and not polishes, side
 
 
 def test_a_leap_beyond_a_flat_stretch_of_mps_upper_side_ends_no_side():

@@ -126,7 +126,8 @@ POLISH_SHARE = 0.05  # quantity's range (a narrow statement: where an unsettled 
 LEAP_POLISHES = 4  # a confirmation that leaps (ρ > FAR_OVER, no range holding it) is re-fitted
 # from a fresh Jacobian while each time at least halves its ρ (DESCENDING), at most this many
 # times: settled, it is judged; still falling, it confirms nothing (cover-164 of 240: 3 times
-# from 1.5·10⁶ to 1.33; cover-185: 8.6·10⁴, 856, 1.05; cover-120: 318, 316, a rise)
+# from 1.5·10⁶ to 1.33, a rise less than quadratic; cover-185: 8.6·10⁴, 856, 1.05, 0.06, under
+# the threshold; cover-120: 318, 316, a rise)
 BETTER_CHI2 = 1.0  # a profile point this many s² below the optimum: another basin
 TRUST = 0.2  # a re-fit's Gauss–Newton step moves no coordinate farther than this
 DAMPING = 1e-8  # of ‖J‖²: the re-fit's Gauss–Newton steps, damped
@@ -413,8 +414,15 @@ class Profiler:
                     # end, polished to 609, 15, 1.33; the truth, −0.096, fits at ρ ≤ 0.15)
                     found, settled = self._settled(quantity, q0 + sign * size, q0, sign, found)
                     self._log(quantity, sign, step, size, far, found)
-                    if not settled:  # still falling: the side is not checked beyond the end
-                        return self._unfinished(quantity, q0, sign, None, under, None, step + 1)
+                    if not settled or found.size <= end.size:
+                        # still falling (or the budget stopped it, or it fell back short of
+                        # the step): the side is not checked beyond the end — a step over
+                        # nearer than the leap stands, unchecked, as for a leap found last
+                        if over is not None and _far_unheld(over):
+                            over, linear_end = None, None
+                        return self._unfinished(
+                            quantity, q0, sign, linear_end, under, over, step + 1
+                        )
                 if found.size > end.size and AGREES[1] < found.ratio < end.ratio / CONFIRM_RATIO:
                     # over the threshold, and beyond the end it was to confirm at less than
                     # half its ρ: the misfit falls beyond it, its re-fit had not settled (cover-046
@@ -780,14 +788,20 @@ class Profiler:
         return (again if ratio_again < ratio else best), jac, True
 
     def _polished(
-        self, quantity: Quantity, target: float, q0: float, sign: float, found: _Step
+        self,
+        quantity: Quantity,
+        target: float,
+        q0: float,
+        sign: float,
+        found: _Step,
+        refused: bool = False,
     ) -> _Step:
         """``found`` re-fitted on from a fresh Jacobian (differences: a run a condition group
         a coordinate): near the threshold, a re-fit whose Jacobian only Broyden's rule
         updated along the side can stop far from settled — cover-107 of 240 stated
         ``k_s ≤ 0.00938`` at ρ 1.14 where a full constrained fit gives 0.32, and its truth
         0.00939 lies at 0.51. Where the budget cannot finish it (a Jacobian that would not
-        fit is not begun), ``found`` stands."""
+        fit is not begun), ``found`` stands (``refused``: :class:`BudgetSpent` is raised)."""
         try:
             self.model.check_jacobian_fits(self.model.coordinates.to_unit(found.x))
             jac = self.model.jacobian(found.x)
@@ -800,6 +814,8 @@ class Profiler:
                 return found
             return self._step(quantity, q0, sign, best, jac)
         except BudgetSpent:
+            if refused:
+                raise
             return found
 
     def _settled(
@@ -809,14 +825,26 @@ class Profiler:
         (``DESCENDING``), at most ``LEAP_POLISHES`` times, and whether it settled: a polish
         lowered it by less, or nothing, or brought it under the threshold — not to it, which
         a re-fit still falling passes on its way (cover-185 of 240: Tcoat's confirmation
-        8.6·10⁴, 856, 1.05, then 0.06 and 0)."""
-        for _ in range(LEAP_POLISHES):
-            polished = self._polished(quantity, target, q0, sign, found)
-            halved = polished.ratio < DESCENDING * found.ratio
-            found = polished
-            if not halved or found.ratio < AGREES[0]:
-                return found, True
-        return found, False
+        8.6·10⁴, 856, 1.05, then 0.06 and 0). Not settled where the budget refused a polish."""
+        ratios = [found.ratio]
+        settled = False
+        try:
+            for _ in range(LEAP_POLISHES):
+                polished = self._polished(quantity, target, q0, sign, found, refused=True)
+                halved = polished.ratio < DESCENDING * found.ratio
+                found = polished
+                ratios.append(found.ratio)
+                if not halved or found.ratio < AGREES[0]:
+                    settled = True
+                    break
+        except BudgetSpent:
+            pass
+        _LOG.debug(
+            "  a leap re-fitted: ρ %s%s",
+            " → ".join(f"{r:.3g}" for r in ratios),
+            "" if settled else ", not settled",
+        )
+        return found, settled
 
     def _descend(
         self,
