@@ -179,10 +179,11 @@ def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
             and r["truth_ratio"] <= 1.0
         ]
         linear = [j["linear"] for j in judged_ if "linear" in j]
+        held = sum(j["covered"] for j in judged_)
         per[name] = {
             "intervals": len(judged_),
-            "coverage": sum(j["covered"] for j in judged_) / len(judged_),
-            "coverage_95": coverage_interval(sum(j["covered"] for j in judged_), len(judged_)),
+            "coverage": held / len(judged_),
+            "coverage_95": coverage_interval(held, len(judged_)),
             "misses_by_kind": {
                 k: sum(m["kind"] == k for m in misses) for k in {m["kind"] for m in misses}
             },

@@ -416,8 +416,9 @@ class Profiler:
                     self._log(quantity, sign, step, size, far, found)
                     if not settled or found.size <= end.size:
                         # still falling (or the budget stopped it, or it fell back short of
-                        # the step): the side is not checked beyond the end — a step over
-                        # nearer than the leap stands, unchecked, as for a leap found last
+                        # the step): the side is not checked beyond the end — the nearest step
+                        # over stands, unchecked, unless it leapt as well (as for a leap found
+                        # last, above)
                         if over is not None and _far_unheld(over):
                             over, linear_end = None, None
                         return self._unfinished(
